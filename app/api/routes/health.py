@@ -1,0 +1,21 @@
+"""Liveness and readiness probes."""
+
+from fastapi import APIRouter, Request
+
+from app.api.problems import ProblemError, problem_responses
+
+router = APIRouter(tags=["health"])
+
+
+@router.get("/healthz")
+async def healthz() -> dict[str, str]:
+    """The process is up and serving HTTP."""
+    return {"status": "ok"}
+
+
+@router.get("/readyz", responses=problem_responses(503))
+async def readyz(request: Request) -> dict[str, str]:
+    """Everything the endpoints need is loaded; 503 while starting or shutting down."""
+    if not getattr(request.app.state, "ready", False):
+        raise ProblemError(503, "not-ready", "Not ready", "the service is starting or stopping")
+    return {"status": "ready"}

@@ -1,0 +1,64 @@
+"""``POST /v1/spectrum``: the truncated Laplace–Beltrami spectrum of an uploaded shape."""
+
+import json
+from typing import Annotated, Literal
+
+import anyio
+from fastapi import APIRouter, File, Form, Query, Request, UploadFile
+
+from app.api.deps import SettingsDep
+from app.api.problems import problem_responses
+from app.geometry.errors import InvalidGeometry
+from app.geometry.io import ALLOWED_TYPES, resolve_file_type
+from app.geometry.pipeline import SpectrumOptions, SpectrumReport, spectrum_from_bytes
+from app.geometry.spectrum import DEFAULT_K, MAX_K
+
+router = APIRouter(tags=["spectra"])
+
+
+@router.post(
+    "/spectrum",
+    response_model=SpectrumReport,
+    responses=problem_responses(413, 415, 422),
+)
+async def spectrum(
+    request: Request,
+    settings: SettingsDep,
+    file: Annotated[UploadFile, File(description="Mesh or point cloud: " + ", ".join(sorted(ALLOWED_TYPES)))],
+    k: Annotated[int, Query(ge=1, le=MAX_K, description="Number of eigenvalues.")] = DEFAULT_K,
+    units: Annotated[Literal["m", "cm", "mm"], Query(description="Units of the file.")] = "m",
+    scale: Annotated[float | None, Query(gt=0, description="Factor to metres; overrides units.")] = None,
+    closed: Annotated[bool, Query(description="Point clouds only: the cloud is a closed surface.")] = False,
+    file_type: Annotated[str | None, Query(description="Overrides the upload's extension.")] = None,
+    boundary: Annotated[str | None, Form(description="Point clouds: JSON list of boundary point indices.")] = None,
+) -> SpectrumReport:
+    """First k Dirichlet (or, for a closed surface, plain) Laplace–Beltrami eigenvalues in 1/m²."""
+    resolved_type = resolve_file_type(file.filename, file_type)
+    data = await file.read()
+    options = SpectrumOptions(
+        k=k,
+        units=units,
+        scale=scale,
+        closed=closed,
+        boundary_indices=_parse_indices(boundary),
+        max_vertices=settings.max_vertices,
+        max_hole_edges=settings.max_hole_edges,
+    )
+    return await anyio.to_thread.run_sync(
+        spectrum_from_bytes, data, resolved_type, options,
+        limiter=request.app.state.solver_limiter,
+    )
+
+
+def _parse_indices(text: str | None) -> list[int] | None:
+    if text is None:
+        return None
+    try:
+        indices = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InvalidGeometry(f"boundary must be a JSON list of integers: {exc}") from exc
+    if not isinstance(indices, list) or not all(
+        isinstance(i, int) and not isinstance(i, bool) for i in indices
+    ):
+        raise InvalidGeometry("boundary must be a JSON list of integers")
+    return indices

@@ -1,0 +1,54 @@
+"""``spectral-unions``: the service's command line (compute a spectrum, start the server)."""
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+import uvicorn
+
+from app.core.config import get_settings
+from app.geometry.errors import GeometryError
+from app.geometry.io import resolve_file_type
+from app.geometry.pipeline import SpectrumOptions, spectrum_from_bytes
+from app.geometry.spectrum import DEFAULT_K, MAX_K
+
+cli = typer.Typer(no_args_is_help=True, add_completion=False)
+
+
+@cli.command()
+def spectrum(
+    file: Annotated[Path, typer.Argument(exists=True, dir_okay=False, readable=True)],
+    k: Annotated[int, typer.Option(min=1, max=MAX_K)] = DEFAULT_K,
+    units: Annotated[str, typer.Option(help="m, cm or mm")] = "m",
+    scale: Annotated[float | None, typer.Option(help="Factor to metres; overrides units.")] = None,
+    closed: Annotated[bool, typer.Option(help="Point clouds: the cloud is closed.")] = False,
+    file_type: Annotated[str | None, typer.Option(help="Overrides the extension.")] = None,
+) -> None:
+    """Print the spectrum of FILE as the JSON that POST /v1/spectrum returns."""
+    settings = get_settings()
+    options = SpectrumOptions(
+        k=k, units=units, scale=scale, closed=closed,
+        max_vertices=settings.max_vertices, max_hole_edges=settings.max_hole_edges,
+    )
+    try:
+        report = spectrum_from_bytes(file.read_bytes(), resolve_file_type(file.name, file_type), options)
+    except GeometryError as exc:
+        typer.echo(json.dumps({"type": f"/problems/{exc.slug}", "title": exc.title, "detail": str(exc)}), err=True)
+        raise typer.Exit(code=2) from exc
+    typer.echo(json.dumps(dataclasses.asdict(report)))
+
+
+@cli.command()
+def serve(
+    host: Annotated[str, typer.Option()] = "127.0.0.1",
+    port: Annotated[int, typer.Option()] = 8000,
+    workers: Annotated[int, typer.Option(min=1)] = 1,
+) -> None:
+    """Start the HTTP service on its embedded defaults."""
+    uvicorn.run("app.main:create_app", factory=True, host=host, port=port, workers=workers)
+
+
+def main() -> None:
+    cli()

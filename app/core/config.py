@@ -1,0 +1,32 @@
+"""One typed settings object, read from ``SPECTRAL_UNIONS_*`` environment variables."""
+
+import os
+from functools import lru_cache
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """Service settings; every field can be overridden by ``SPECTRAL_UNIONS_<FIELD>``."""
+
+    model_config = SettingsConfigDict(env_prefix="SPECTRAL_UNIONS_")
+
+    max_upload_bytes: int = Field(
+        64 * 1024 * 1024, gt=0, description="Largest request body accepted, counted while streaming."
+    )
+    max_vertices: int = Field(100_000, gt=0, description="Vertex cap for an uploaded shape.")
+    max_hole_edges: int = Field(
+        8, ge=0, description="Boundary loops up to this many edges are pin-holes and get filled."
+    )
+    solver_concurrency: int = Field(
+        default_factory=lambda: max(1, os.cpu_count() or 1),
+        gt=0,
+        description="Eigen-solves running at once; more requests wait for a slot.",
+    )
+
+
+@lru_cache
+def get_settings() -> Settings:
+    """Settings built on first use, not at import, so tests can pass their own."""
+    return Settings()

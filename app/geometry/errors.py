@@ -1,0 +1,51 @@
+"""Input errors raised by the geometry layer.
+
+Each carries a stable ``slug`` that the API turns into a problem ``type``; the HTTP status
+belongs to the API layer, not here.
+"""
+
+
+class GeometryError(ValueError):
+    """Base class: the input cannot be turned into a spectrum, and the reason is the caller's."""
+
+    slug = "invalid-geometry"
+    title = "Invalid geometry"
+
+
+class UnsupportedFileType(GeometryError):
+    """The file type is not on the allow-list (archives, unknown extensions)."""
+
+    slug = "unsupported-file-type"
+    title = "Unsupported file type"
+
+
+class UnreadableFile(GeometryError):
+    """The bytes do not parse as the declared file type."""
+
+    slug = "unreadable-file"
+    title = "File could not be parsed"
+
+
+class InvalidGeometry(GeometryError):
+    """The file parsed but the shape fails validation (NaNs, bad indices, zero area, too small)."""
+
+
+class TooManyVertices(GeometryError):
+    """The shape exceeds the configured vertex cap."""
+
+    slug = "too-many-vertices"
+    title = "Too many vertices"
+
+
+class MissingBoundary(GeometryError):
+    """A point cloud was neither declared closed nor given its boundary points."""
+
+    slug = "missing-boundary"
+    title = "Point-cloud boundary not given"
+
+
+class SolverFailure(GeometryError):
+    """The eigen-solver did not converge on this input (a pathological shape)."""
+
+    slug = "solver-failure"
+    title = "Eigen-solver failed on this shape"

@@ -1,0 +1,200 @@
+"""Parse uploaded meshes and point clouds from bytes, safely.
+
+Why this module is careful: an upload is hostile until proven otherwise. The file type
+comes from an allow-list, never from sniffing; parsing goes through an in-memory buffer
+with an explicit type and a resolver that refuses every external reference, so nothing in a
+file (an OBJ ``mtllib``, a glTF buffer URI) can make the server read another file or the
+network. Archives are refused outright.
+"""
+
+import io
+import re
+from pathlib import PurePosixPath
+
+import numpy as np
+import trimesh
+from trimesh.resolvers import Resolver
+
+from app.geometry.errors import (
+    GeometryError,
+    InvalidGeometry,
+    TooManyVertices,
+    UnreadableFile,
+    UnsupportedFileType,
+)
+from app.geometry.shapes import Mesh, PointCloud, Shape
+
+MESH_TYPES = frozenset({"ply", "obj", "off", "stl", "glb"})
+POINT_TYPES = frozenset({"xyz", "txt", "npy"})
+# PLY holds either: a PLY without faces is a point cloud.
+ALLOWED_TYPES = MESH_TYPES | POINT_TYPES
+
+UNIT_TO_METRES = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+_PLY_VERTEX_COUNT = re.compile(rb"^element\s+vertex\s+(\d+)\s*$", re.MULTILINE)
+_OBJ_MATERIAL_LINE = re.compile(rb"^[ \t]*(mtllib|usemtl)\b[^\n]*$", re.MULTILINE)
+
+
+class ExternalReference(UnreadableFile):
+    """The file refers to another file or URL, which we never follow."""
+
+    slug = "external-reference"
+    title = "External references are not allowed"
+
+
+class _RefusingResolver(Resolver):
+    """A trimesh resolver that refuses every lookup, so loaders cannot reach outside the upload."""
+
+    def __init__(self) -> None:
+        pass
+
+    def get(self, key: str) -> bytes:
+        raise ExternalReference(f"the file refers to {key!r}; only self-contained files are accepted")
+
+    def write(self, name: str, data: bytes) -> None:
+        raise ExternalReference(f"refusing to write {name!r}")
+
+    def namespaced(self, namespace: str) -> "_RefusingResolver":
+        return self
+
+    def keys(self) -> list[str]:
+        return []
+
+
+def resolve_file_type(filename: str | None, explicit: str | None = None) -> str:
+    """Return the allow-listed file type from an explicit parameter or the upload's extension.
+
+    Raises
+    ------
+    UnsupportedFileType
+        When neither names an allowed type (archives included).
+    """
+    candidate = explicit or (PurePosixPath(filename).suffix.lstrip(".") if filename else "")
+    file_type = candidate.lower().strip()
+    if file_type not in ALLOWED_TYPES:
+        allowed = ", ".join(sorted(ALLOWED_TYPES))
+        shown = repr(candidate) if candidate else "none"
+        raise UnsupportedFileType(f"file type {shown} is not accepted; allowed: {allowed}")
+    return file_type
+
+
+def unit_scale(units: str = "m", scale: float | None = None) -> float:
+    """Factor that converts input coordinates to metres; an explicit ``scale`` wins over ``units``."""
+    if scale is not None:
+        if not np.isfinite(scale) or scale <= 0:
+            raise InvalidGeometry(f"scale must be a positive finite number, got {scale}")
+        return float(scale)
+    if units not in UNIT_TO_METRES:
+        raise InvalidGeometry(f"units must be one of {sorted(UNIT_TO_METRES)}, got {units!r}")
+    return UNIT_TO_METRES[units]
+
+
+def load_shape(data: bytes, file_type: str, *, scale: float = 1.0, max_vertices: int) -> Shape:
+    """Parse ``data`` as ``file_type`` and return it in metres (coordinates times ``scale``).
+
+    Parameters
+    ----------
+    data : bytes
+        The whole upload.
+    file_type : str
+        One of ``ALLOWED_TYPES`` (see :func:`resolve_file_type`).
+    scale : float
+        Multiplier to metres (see :func:`unit_scale`).
+    max_vertices : int
+        Refuse shapes with more vertices, before allocating them where the format allows.
+
+    Raises
+    ------
+    UnsupportedFileType, UnreadableFile, TooManyVertices
+    """
+    if file_type not in ALLOWED_TYPES:
+        raise UnsupportedFileType(f"file type {file_type!r} is not accepted")
+    if file_type == "npy":
+        shape = _load_npy(data)
+    else:
+        if file_type == "ply":
+            _check_ply_header(data, max_vertices)
+        if file_type == "obj":
+            # Material libraries only colour the mesh; drop them so they are never looked up.
+            data = _OBJ_MATERIAL_LINE.sub(b"", data)
+        shape = _load_with_trimesh(data, "xyz" if file_type == "txt" else file_type)
+    count = len(shape.vertices) if isinstance(shape, Mesh) else len(shape.points)
+    if count > max_vertices:
+        raise TooManyVertices(f"{count} vertices exceed the cap of {max_vertices}")
+    return _scaled(shape, scale)
+
+
+def _scaled(shape: Shape, scale: float) -> Shape:
+    if isinstance(shape, Mesh):
+        return Mesh(shape.vertices * scale, shape.faces)
+    return PointCloud(shape.points * scale, shape.boundary)
+
+
+def _check_ply_header(data: bytes, max_vertices: int) -> None:
+    """Refuse a PLY that declares more vertices than the cap before the parser allocates them."""
+    header = data[: data.find(b"end_header")] if b"end_header" in data[:65536] else data[:65536]
+    match = _PLY_VERTEX_COUNT.search(header)
+    if match and int(match.group(1)) > max_vertices:
+        raise TooManyVertices(
+            f"the PLY header declares {int(match.group(1))} vertices; the cap is {max_vertices}"
+        )
+
+
+def _load_npy(data: bytes) -> PointCloud:
+    try:
+        points = np.load(io.BytesIO(data), allow_pickle=False)
+    except Exception as exc:  # numpy raises several unrelated types for bad bytes
+        raise UnreadableFile(f"not a valid .npy file: {exc}") from exc
+    if points.ndim != 2 or points.shape[1] != 3 or not np.issubdtype(points.dtype, np.number):
+        raise UnreadableFile(f"a .npy point cloud must be a numeric (n, 3) array, got {points.shape}")
+    return PointCloud(np.asarray(points, dtype=np.float64))
+
+
+def _load_with_trimesh(data: bytes, file_type: str) -> Shape:
+    try:
+        scene = trimesh.load_scene(
+            io.BytesIO(data), file_type=file_type, resolver=_RefusingResolver(), process=False
+        )
+        geometries = list(scene.geometry.values())
+        if not geometries:
+            raise UnreadableFile(f"no geometry found in the {file_type} file")
+        if all(isinstance(g, trimesh.PointCloud) for g in geometries):
+            return _point_cloud_from(geometries)
+        mesh = scene.to_mesh()
+    except GeometryError:
+        raise
+    except Exception as exc:  # parsers raise anything from KeyError to struct.error on bad bytes
+        cause = _external_reference_in(exc)
+        if cause is not None:
+            raise cause from exc
+        raise UnreadableFile(f"could not parse the {file_type} file: {exc}") from exc
+    faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+    vertices = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+    if len(faces) == 0:
+        return PointCloud(vertices)
+    return Mesh(vertices, faces)
+
+
+def _external_reference_in(exc: BaseException) -> ExternalReference | None:
+    """Find our resolver's refusal when a loader wrapped it in its own exception."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, ExternalReference):
+            return seen
+        seen = seen.__cause__ or seen.__context__
+    return None
+
+
+def _point_cloud_from(geometries: list) -> PointCloud:
+    points = np.concatenate([np.asarray(g.vertices, dtype=np.float64) for g in geometries])
+    flags = [_ply_boundary_flags(g) for g in geometries]
+    boundary = None if any(f is None for f in flags) else np.concatenate(flags)
+    return PointCloud(points, boundary)
+
+
+def _ply_boundary_flags(cloud: trimesh.PointCloud) -> np.ndarray | None:
+    """The optional PLY vertex property ``boundary`` (non-zero = boundary point)."""
+    raw = cloud.metadata.get("_ply_raw", {}).get("vertex", {}).get("data", {})
+    if not isinstance(raw, dict) or "boundary" not in raw:
+        return None
+    return np.asarray(raw["boundary"]).reshape(-1) != 0

@@ -1,0 +1,121 @@
+"""Combinatorial helpers on triangle meshes: edges, boundary, components, pin-hole filling."""
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area of each triangle, (m,), in the squared units of ``vertices``."""
+    a, b, c = (vertices[faces[:, i]] for i in range(3))
+    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+def half_edges(faces: np.ndarray) -> np.ndarray:
+    """Directed edges (3m, 2) in face order: all first edges, then all second, then all third."""
+    return np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+
+
+def edge_face_counts(half: np.ndarray) -> np.ndarray:
+    """For each half-edge, how many faces share its undirected edge (1 = boundary)."""
+    low, high = half.min(axis=1), half.max(axis=1)
+    # One int64 key per undirected edge: far faster than np.unique over rows.
+    keys = low * (int(high.max()) + 1) + high
+    _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    return counts[inverse]
+
+
+def boundary_half_edges(faces: np.ndarray) -> np.ndarray:
+    """Directed edges (h, 2) that belong to exactly one face, oriented as in that face."""
+    half = half_edges(faces)
+    return half[edge_face_counts(half) == 1]
+
+
+def boundary_vertex_mask(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """True for vertices on an edge that only one face uses (the Dirichlet boundary)."""
+    mask = np.zeros(n_vertices, dtype=bool)
+    mask[boundary_half_edges(faces).reshape(-1)] = True
+    return mask
+
+
+def largest_component(
+    vertices: np.ndarray, faces: np.ndarray
+) -> tuple[np.ndarray, int]:
+    """Faces of the largest edge-connected component by area, and how many others were dropped.
+
+    Components are joined through shared vertices; area, not vertex count, decides, because a
+    scan's dense fragment can out-count a coarser main surface.
+    """
+    n = len(vertices)
+    rows = np.repeat(faces[:, 0], 2)
+    cols = faces[:, 1:].reshape(-1)
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    face_labels = labels[faces[:, 0]]
+    present, face_labels = np.unique(face_labels, return_inverse=True)
+    area = np.bincount(face_labels, weights=face_areas(vertices, faces))
+    keep = int(np.argmax(area))
+    return faces[face_labels == keep], len(present) - 1
+
+
+def drop_unreferenced(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Remove vertices no face uses (they would give empty rows in the mass matrix)."""
+    used, inverse = np.unique(faces, return_inverse=True)
+    return vertices[used], inverse.reshape(faces.shape)
+
+
+def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
+    """Closed boundary loops as vertex sequences following the boundary half-edges.
+
+    Loops through a pinched vertex (two outgoing boundary edges) are ambiguous and left out,
+    so callers never modify a boundary they cannot trace unambiguously.
+    """
+    half = boundary_half_edges(faces)
+    starts, counts = np.unique(half[:, 0], return_counts=True)
+    pinched = set(starts[counts > 1].tolist())
+    successor = {int(a): int(b) for a, b in half if a not in pinched}
+    loops, visited = [], set()
+    for start in successor:
+        if start in visited:
+            continue
+        loop, current = [], start
+        while current in successor and current not in visited:
+            visited.add(current)
+            loop.append(current)
+            current = successor[current]
+        if current == start:
+            loops.append(np.array(loop, dtype=np.int64))
+    return loops
+
+
+def fill_small_holes(
+    vertices: np.ndarray, faces: np.ndarray, max_edges: int, max_relative_perimeter: float = 0.2
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Cap short boundary loops (scanner pin-holes) with a centroid fan.
+
+    Every boundary loop becomes a Dirichlet boundary, so a missing triangle or two would inflate
+    the spectrum far beyond what the shape warrants. A loop is a pin-hole when it has at most
+    ``max_edges`` edges *and* its perimeter is under ``max_relative_perimeter`` times the square
+    root of the surface area: the second test keeps a coarse but genuine partial surface (a
+    hexagonal patch) from being closed up.
+
+    Returns the new vertices, the new faces and the number of holes filled.
+    """
+    if max_edges < 3:
+        return vertices, faces, 0
+    scale = np.sqrt(face_areas(vertices, faces).sum())
+    new_vertices, new_faces = [vertices], [faces]
+    next_index = len(vertices)
+    filled = 0
+    for loop in boundary_loops(faces):
+        ring = vertices[loop]
+        perimeter = np.linalg.norm(ring - np.roll(ring, -1, axis=0), axis=1).sum()
+        if len(loop) > max_edges or perimeter > max_relative_perimeter * scale:
+            continue
+        new_vertices.append(ring.mean(axis=0, keepdims=True))
+        # A boundary half-edge a→b lies in a face ordered a→b; the cap uses b→a to match.
+        nxt = np.roll(loop, -1)
+        new_faces.append(np.column_stack([nxt, loop, np.full(len(loop), next_index)]))
+        next_index += 1
+        filled += 1
+    return np.concatenate(new_vertices), np.concatenate(new_faces), filled

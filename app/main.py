@@ -1,0 +1,38 @@
+"""Builds the FastAPI application; ``create_app`` is the uvicorn factory."""
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+import anyio
+from fastapi import FastAPI
+
+from app import __version__
+from app.api.problems import install_problem_handlers
+from app.api.routes import health, spectrum
+from app.api.upload_limit import UploadLimitMiddleware
+from app.core.config import Settings, get_settings
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """A configured app; the lifespan opens what the endpoints need and flips readiness."""
+    settings = settings or get_settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        app.state.solver_limiter = anyio.CapacityLimiter(settings.solver_concurrency)
+        app.state.ready = True
+        yield
+        app.state.ready = False
+
+    app = FastAPI(
+        title="spectral-unions",
+        version=__version__,
+        summary="Laplace–Beltrami spectra of partial deformable 3D shapes.",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.add_middleware(UploadLimitMiddleware, max_bytes=settings.max_upload_bytes)
+    install_problem_handlers(app)
+    app.include_router(health.router)
+    app.include_router(spectrum.router, prefix="/v1")
+    return app

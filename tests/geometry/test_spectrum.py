@@ -1,0 +1,134 @@
+"""The spectrum engine against analytic spectra and exact properties of the continuous operator."""
+
+import numpy as np
+import pytest
+import robust_laplacian
+import scipy.sparse.linalg as sla
+
+from app.geometry.laplacian import _corner_cotangents, _edge_weights, mesh_operators
+from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
+from app.geometry.shapes import Mesh
+from app.geometry.spectrum import eigenvalues, shift_for
+from app.geometry.topology import boundary_vertex_mask
+from tests.conftest import disk, grid, sphere
+
+# Squared zeros of the Bessel functions J_n: the Dirichlet spectrum of the unit disk.
+DISK = [5.7832, 14.682, 14.682, 26.375, 26.375, 30.471, 40.706, 40.706, 49.218, 49.218]
+# Dirichlet spectrum of [0, π]²: m² + n² for m, n ≥ 1.
+SQUARE = sorted(m * m + n * n for m in range(1, 10) for n in range(1, 10))[:16]
+# Closed unit sphere: l(l + 1) with multiplicity 2l + 1.
+SPHERE = [l * (l + 1) for l in range(5) for _ in range(2 * l + 1)][:20]
+
+
+def spectrum_of(mesh: Mesh, k: int = 20) -> np.ndarray:
+    return np.array(mesh_spectrum(mesh, SpectrumOptions(k=k, max_hole_edges=0)).eigenvalues)
+
+
+def test_unit_disk_matches_bessel_zeros():
+    values = spectrum_of(disk(rings=30), k=len(DISK))
+    np.testing.assert_allclose(values, DISK, rtol=0.01)
+
+
+def test_square_matches_sum_of_squares():
+    values = spectrum_of(grid(np.pi, np.pi, 60, 60), k=len(SQUARE))
+    np.testing.assert_allclose(values, SQUARE, rtol=0.01)
+
+
+def test_closed_sphere_matches_l_l_plus_one():
+    report = mesh_spectrum(sphere(4), SpectrumOptions(k=20))
+    assert report.boundary == "none"
+    values = np.array(report.eigenvalues)
+    assert abs(values[0]) < 1e-8
+    np.testing.assert_allclose(values[1:], SPHERE[1:], rtol=0.01)
+
+
+def test_agrees_with_plain_scipy_solve_of_the_same_matrices(patch):
+    operators = mesh_operators(patch.vertices, patch.faces)
+    fixed = boundary_vertex_mask(patch.faces, len(patch.vertices))
+    free = np.flatnonzero(~fixed)
+    stiffness = operators.stiffness[free][:, free]
+    mass = operators.mass[free][:, free]
+    reference = np.sort(sla.eigsh(stiffness, 20, mass, sigma=shift_for(mass))[0])
+    np.testing.assert_allclose(eigenvalues(operators, 20, fixed), reference, rtol=1e-8)
+
+
+def test_fast_assembly_equals_robust_laplacian_on_a_delaunay_mesh():
+    mesh = disk(rings=12)
+    ours = mesh_operators(mesh.vertices, mesh.faces)
+    stiffness, mass = robust_laplacian.mesh_laplacian(mesh.vertices, mesh.faces)
+    scale = abs(stiffness).max()
+    assert abs(ours.stiffness - stiffness).max() < 1e-12 * scale
+    assert abs(ours.mass - mass).max() < 1e-12 * mass.max()
+
+
+def test_non_delaunay_mesh_gets_the_intrinsic_delaunay_laplacian():
+    # Shearing a grid puts every cell's diagonal along its long axis, opposite two obtuse
+    # angles: the plain cotangent weights go negative there, the intrinsic Delaunay ones must not.
+    mesh = grid(1.0, 1.0, 8, 8)
+    sheared = mesh.vertices + np.outer(mesh.vertices[:, 1], [0.8, 0.0, 0.0])
+    assert _edge_weights(mesh.faces, _corner_cotangents(sheared, mesh.faces), 81).data.min() < 0
+    ours = mesh_operators(sheared, mesh.faces)
+    stiffness, _ = robust_laplacian.mesh_laplacian(sheared, mesh.faces)
+    assert abs(ours.stiffness - stiffness).max() < 1e-12 * abs(stiffness).max()
+    off_diagonal = ours.stiffness - np.diag(ours.stiffness.diagonal())
+    assert off_diagonal.max() <= 1e-12
+
+
+def test_rigid_motion_and_reordering_leave_the_spectrum_unchanged(patch):
+    rng = np.random.default_rng(1)
+    rotation, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    moved = patch.vertices @ rotation.T + np.array([3.0, -2.0, 0.5])
+    order = rng.permutation(len(patch.vertices))
+    inverse = np.argsort(order)
+    shuffled = Mesh(moved[order], inverse[patch.faces][rng.permutation(len(patch.faces))])
+    np.testing.assert_allclose(spectrum_of(shuffled), spectrum_of(patch), rtol=1e-8)
+
+
+@pytest.mark.parametrize("factor", [0.01, 3.0, 1000.0])
+def test_scaling_law(patch, factor):
+    scaled = Mesh(patch.vertices * factor, patch.faces)
+    np.testing.assert_allclose(spectrum_of(scaled), spectrum_of(patch) / factor**2, rtol=1e-8)
+
+
+def test_isometric_bending_keeps_the_spectrum():
+    flat = grid(np.pi, 1.0, 90, 30)
+    angle = flat.vertices[:, 0]  # arc length on the unit circle
+    rolled = np.column_stack([np.cos(angle), flat.vertices[:, 1], np.sin(angle)])
+    bent = spectrum_of(Mesh(rolled, flat.faces), k=10)
+    np.testing.assert_allclose(bent, spectrum_of(flat, k=10), rtol=0.01)
+
+
+def test_a_subregion_has_larger_dirichlet_eigenvalues():
+    whole = disk(rings=20)
+    centroids = whole.vertices[whole.faces].mean(axis=1)
+    inner = centroids[:, 0] ** 2 + (centroids[:, 1] - 0.2) ** 2 < 0.6**2
+    region = Mesh(whole.vertices, whole.faces[inner])
+    assert np.all(spectrum_of(whole, k=15) <= spectrum_of(region, k=15))
+
+
+def test_pin_hole_is_filled_and_the_sphere_stays_closed():
+    full = sphere(3)
+    holed = Mesh(full.vertices, full.faces[1:])
+    report = mesh_spectrum(holed, SpectrumOptions(k=10, max_hole_edges=8))
+    assert report.holes_filled == 1
+    assert report.boundary == "none"
+    np.testing.assert_allclose(report.eigenvalues[1:], spectrum_of(full, k=10)[1:], rtol=0.01)
+
+
+def test_a_coarse_genuine_boundary_is_not_filled():
+    hexagon = disk(rings=4)
+    report = mesh_spectrum(hexagon, SpectrumOptions(k=5, max_hole_edges=8))
+    assert report.holes_filled == 0
+    assert report.boundary == "dirichlet"
+
+
+def test_largest_component_by_area_is_kept():
+    big, small = disk(radius=1.0, rings=15), disk(radius=0.5, rings=25)
+    shifted = small.vertices + np.array([5.0, 0.0, 0.0])
+    both = Mesh(
+        np.concatenate([shifted, big.vertices]),
+        np.concatenate([small.faces, big.faces + len(shifted)]),
+    )
+    report = mesh_spectrum(both, SpectrumOptions(k=8))
+    assert report.components_dropped == 1
+    np.testing.assert_allclose(report.eigenvalues, spectrum_of(big, k=8), rtol=1e-8)
