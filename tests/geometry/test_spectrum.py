@@ -17,7 +17,7 @@ DISK = [5.7832, 14.682, 14.682, 26.375, 26.375, 30.471, 40.706, 40.706, 49.218, 
 # Dirichlet spectrum of [0, π]²: m² + n² for m, n ≥ 1.
 SQUARE = sorted(m * m + n * n for m in range(1, 10) for n in range(1, 10))[:16]
 # Closed unit sphere: l(l + 1) with multiplicity 2l + 1.
-SPHERE = [l * (l + 1) for l in range(5) for _ in range(2 * l + 1)][:20]
+SPHERE = [d * (d + 1) for d in range(5) for _ in range(2 * d + 1)][:20]
 
 
 def spectrum_of(mesh: Mesh, k: int = 20) -> np.ndarray:
