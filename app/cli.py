@@ -29,8 +29,12 @@ def spectrum(
     """Print the spectrum of FILE as the JSON that POST /v1/spectrum returns."""
     settings = get_settings()
     options = SpectrumOptions(
-        k=k, units=units, scale=scale, closed=closed,
-        max_vertices=settings.max_vertices, max_hole_edges=settings.max_hole_edges,
+        k=k,
+        units=units,
+        scale=scale,
+        closed=closed,
+        max_vertices=settings.max_vertices,
+        max_hole_edges=settings.max_hole_edges,
     )
     try:
         report = spectrum_from_bytes(file.read_bytes(), resolve_file_type(file.name, file_type), options)

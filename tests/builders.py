@@ -13,16 +13,20 @@ from app.geometry.shapes import Mesh
 
 def mesh_bytes(mesh: Mesh, file_type: str, **kwargs) -> bytes:
     """Export with trimesh (ply takes ``encoding='ascii'|'binary'``)."""
-    exported = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).export(
-        file_type=file_type, **kwargs
-    )
+    exported = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).export(file_type=file_type, **kwargs)
     return exported.encode() if isinstance(exported, str) else exported
 
 
 def ascii_ply(vertices: np.ndarray, faces: np.ndarray | None = None, boundary=None) -> bytes:
     """A hand-written ASCII PLY, so broken values (NaN, bad indices) go in verbatim."""
-    lines = ["ply", "format ascii 1.0", f"element vertex {len(vertices)}",
-             "property double x", "property double y", "property double z"]
+    lines = [
+        "ply",
+        "format ascii 1.0",
+        f"element vertex {len(vertices)}",
+        "property double x",
+        "property double y",
+        "property double z",
+    ]
     if boundary is not None:
         lines.append("property uchar boundary")
     if faces is not None:
@@ -48,8 +52,14 @@ def glb_with_external_buffer(uri: str, mesh: Mesh) -> bytes:
             {"buffer": 0, "byteOffset": len(positions), "byteLength": len(indices)},
         ],
         "accessors": [
-            {"bufferView": 0, "componentType": 5126, "count": len(mesh.vertices), "type": "VEC3",
-             "min": mesh.vertices.min(axis=0).tolist(), "max": mesh.vertices.max(axis=0).tolist()},
+            {
+                "bufferView": 0,
+                "componentType": 5126,
+                "count": len(mesh.vertices),
+                "type": "VEC3",
+                "min": mesh.vertices.min(axis=0).tolist(),
+                "max": mesh.vertices.max(axis=0).tolist(),
+            },
             {"bufferView": 1, "componentType": 5125, "count": mesh.faces.size, "type": "SCALAR"},
         ],
         "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],

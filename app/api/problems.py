@@ -46,8 +46,7 @@ def status_for(error: GeometryError) -> int:
 def problem_responses(*statuses: int) -> dict[int | str, dict]:
     """OpenAPI ``responses=`` entries for the given statuses, all with the Problem body."""
     return {
-        status: {"model": Problem, "content": {PROBLEM_MEDIA_TYPE: {}}, "description": "Problem"}
-        for status in statuses
+        status: {"model": Problem, "content": {PROBLEM_MEDIA_TYPE: {}}, "description": "Problem"} for status in statuses
     }
 
 
@@ -60,9 +59,7 @@ def install_problem_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(RequestValidationError)
     async def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
-        detail = "; ".join(
-            f"{'.'.join(str(p) for p in err['loc'])}: {err['msg']}" for err in exc.errors()
-        )
+        detail = "; ".join(f"{'.'.join(str(p) for p in err['loc'])}: {err['msg']}" for err in exc.errors())
         return problem_response(422, "invalid-request", "Invalid request", detail)
 
     @app.exception_handler(HTTPException)

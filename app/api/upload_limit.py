@@ -11,8 +11,9 @@ from app.api.problems import ProblemError, problem_response
 
 class UploadTooLarge(ProblemError):
     def __init__(self, limit: int) -> None:
-        super().__init__(413, "upload-too-large", "Upload too large",
-                         f"the request body exceeds the cap of {limit} bytes")
+        super().__init__(
+            413, "upload-too-large", "Upload too large", f"the request body exceeds the cap of {limit} bytes"
+        )
 
 
 class UploadLimitMiddleware:

@@ -135,9 +135,7 @@ def _check_ply_header(data: bytes, max_vertices: int) -> None:
     header = data[: data.find(b"end_header")] if b"end_header" in data[:65536] else data[:65536]
     match = _PLY_VERTEX_COUNT.search(header)
     if match and int(match.group(1)) > max_vertices:
-        raise TooManyVertices(
-            f"the PLY header declares {int(match.group(1))} vertices; the cap is {max_vertices}"
-        )
+        raise TooManyVertices(f"the PLY header declares {int(match.group(1))} vertices; the cap is {max_vertices}")
 
 
 def _load_npy(data: bytes) -> PointCloud:
@@ -152,9 +150,7 @@ def _load_npy(data: bytes) -> PointCloud:
 
 def _load_with_trimesh(data: bytes, file_type: str) -> Shape:
     try:
-        scene = trimesh.load_scene(
-            io.BytesIO(data), file_type=file_type, resolver=_RefusingResolver(), process=False
-        )
+        scene = trimesh.load_scene(io.BytesIO(data), file_type=file_type, resolver=_RefusingResolver(), process=False)
         geometries = list(scene.geometry.values())
         if not geometries:
             raise UnreadableFile(f"no geometry found in the {file_type} file")

@@ -69,8 +69,7 @@ def _corner_cotangents(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray | 
     """
     # Edge opposite corner i runs between the other two corners.
     lengths = np.stack(
-        [np.linalg.norm(vertices[faces[:, (i + 1) % 3]] - vertices[faces[:, (i + 2) % 3]], axis=1)
-         for i in range(3)],
+        [np.linalg.norm(vertices[faces[:, (i + 1) % 3]] - vertices[faces[:, (i + 2) % 3]], axis=1) for i in range(3)],
         axis=1,
     )
     slack = lengths.sum(axis=1, keepdims=True) - 2 * lengths
@@ -104,9 +103,7 @@ def _is_intrinsic_delaunay(faces: np.ndarray, cotangents: np.ndarray, n: int) ->
     return bool(weights.data.min() >= -1e-12)
 
 
-def _cotangent_operators(
-    vertices: np.ndarray, faces: np.ndarray, cotangents: np.ndarray
-) -> Operators:
+def _cotangent_operators(vertices: np.ndarray, faces: np.ndarray, cotangents: np.ndarray) -> Operators:
     n = len(vertices)
     weights = _edge_weights(faces, cotangents, n)
     stiffness = sp.diags(np.asarray(weights.sum(axis=1)).ravel()) - weights

@@ -72,14 +72,18 @@ def mesh_spectrum(mesh: Mesh, options: SpectrumOptions, scale: float = 1.0) -> S
 
 def cloud_spectrum(cloud: PointCloud, options: SpectrumOptions, scale: float = 1.0) -> SpectrumReport:
     """Spectrum of a point cloud in metres: plain if declared closed, else Dirichlet on its flags."""
-    prepared = prepare_cloud(
-        cloud, k=options.k, closed=options.closed, boundary_indices=options.boundary_indices
-    )
+    prepared = prepare_cloud(cloud, k=options.k, closed=options.closed, boundary_indices=options.boundary_indices)
     started = time.perf_counter()
     operators = point_cloud_operators(prepared.cloud.points)
     return _solve(
-        operators, prepared.boundary, options.k, started,
-        kind="points", components_dropped=0, holes_filled=0, scale=scale,
+        operators,
+        prepared.boundary,
+        options.k,
+        started,
+        kind="points",
+        components_dropped=0,
+        holes_filled=0,
+        scale=scale,
     )
 
 

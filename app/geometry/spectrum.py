@@ -73,7 +73,13 @@ def eigenvalues(operators: Operators, k: int, fixed: np.ndarray | None = None) -
         inverse = sla.LinearOperator((n, n), matvec=factor.solve, dtype=np.float64)
         start = np.random.default_rng(0).standard_normal(n)
         values = sla.eigsh(
-            standard, k=k, sigma=sigma, OPinv=inverse, which="LM", v0=start, tol=ARPACK_TOL,
+            standard,
+            k=k,
+            sigma=sigma,
+            OPinv=inverse,
+            which="LM",
+            v0=start,
+            tol=ARPACK_TOL,
             return_eigenvectors=False,
         )
     except (ValueError, sla.ArpackError) as exc:

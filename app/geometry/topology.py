@@ -38,9 +38,7 @@ def boundary_vertex_mask(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     return mask
 
 
-def largest_component(
-    vertices: np.ndarray, faces: np.ndarray
-) -> tuple[np.ndarray, int]:
+def largest_component(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, int]:
     """Faces of the largest edge-connected component by area, and how many others were dropped.
 
     Components are joined through shared vertices; area, not vertex count, decides, because a

@@ -61,8 +61,7 @@ def prepare_mesh(mesh: Mesh, *, k: int, max_hole_edges: int) -> PreparedMesh:
     require_finite(vertices)
     _require_valid_faces(faces, len(vertices))
     vertices, faces = _merge_duplicate_vertices(vertices, faces)
-    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
-                  & (faces[:, 2] != faces[:, 0])]
+    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])]
     if len(faces) == 0:
         raise InvalidGeometry("every face repeats a vertex: there is no surface")
     if face_areas(vertices, faces).sum() <= 1e-12 * _extent(vertices) ** 2:
@@ -75,9 +74,7 @@ def prepare_mesh(mesh: Mesh, *, k: int, max_hole_edges: int) -> PreparedMesh:
     return PreparedMesh(Mesh(vertices, faces), boundary, dropped, filled)
 
 
-def prepare_cloud(
-    cloud: PointCloud, *, k: int, closed: bool, boundary_indices: list[int] | None
-) -> PreparedCloud:
+def prepare_cloud(cloud: PointCloud, *, k: int, closed: bool, boundary_indices: list[int] | None) -> PreparedCloud:
     """Check a point cloud and settle its boundary: declared closed, flagged in the file, or listed.
 
     Automatic boundary detection is not attempted: angular-gap detectors flag interior points
@@ -114,14 +111,10 @@ def _require_valid_faces(faces: np.ndarray, n_vertices: int) -> None:
     if faces.ndim != 2 or faces.shape[1] != 3:
         raise InvalidGeometry("faces must be triangles")
     if faces.min() < 0 or faces.max() >= n_vertices:
-        raise InvalidGeometry(
-            f"face indices must lie in [0, {n_vertices - 1}], found {faces.min()}..{faces.max()}"
-        )
+        raise InvalidGeometry(f"face indices must lie in [0, {n_vertices - 1}], found {faces.min()}..{faces.max()}")
 
 
-def _merge_duplicate_vertices(
-    vertices: np.ndarray, faces: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def _merge_duplicate_vertices(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Merge vertices with identical coordinates (STL stores every triangle on its own)."""
     unique, inverse = np.unique(vertices, axis=0, return_inverse=True)
     return unique, inverse.reshape(-1)[faces]
@@ -133,6 +126,4 @@ def _extent(points: np.ndarray) -> float:
 
 def _require_room_for(k: int, free_vertices: int) -> None:
     if free_vertices < k + 1:
-        raise InvalidGeometry(
-            f"{free_vertices} interior vertices are too few for {k} eigenvalues (need {k + 1})"
-        )
+        raise InvalidGeometry(f"{free_vertices} interior vertices are too few for {k} eigenvalues (need {k + 1})")

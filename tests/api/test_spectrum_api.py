@@ -49,10 +49,8 @@ def test_spectrum_of_a_mesh(client, patch):
 def test_units_and_scale(client, patch):
     in_mm = ascii_ply(patch.vertices * 1000, patch.faces)
     metres = post(client, "p.ply", ascii_ply(patch.vertices, patch.faces)).json()["eigenvalues"]
-    np.testing.assert_allclose(post(client, "p.ply", in_mm, units="mm").json()["eigenvalues"],
-                               metres, rtol=1e-8)
-    np.testing.assert_allclose(post(client, "p.ply", in_mm, scale=0.001).json()["eigenvalues"],
-                               metres, rtol=1e-8)
+    np.testing.assert_allclose(post(client, "p.ply", in_mm, units="mm").json()["eigenvalues"], metres, rtol=1e-8)
+    np.testing.assert_allclose(post(client, "p.ply", in_mm, scale=0.001).json()["eigenvalues"], metres, rtol=1e-8)
 
 
 def test_closed_point_cloud_is_close_to_the_sphere_spectrum(client):
@@ -68,31 +66,40 @@ def test_partial_point_cloud_needs_its_boundary(client):
     assert_problem(post(client, "d.npy", npy_bytes(points), k=5), 422, "missing-boundary")
     rim = np.flatnonzero(np.linalg.norm(points[:, :2], axis=1) > 1 - 1e-9)
     flagged = client.post(
-        "/v1/spectrum", params={"k": 3}, files={"file": ("d.npy", npy_bytes(points))},
+        "/v1/spectrum",
+        params={"k": 3},
+        files={"file": ("d.npy", npy_bytes(points))},
         data={"boundary": json.dumps(rim.tolist())},
     )
     assert flagged.status_code == 200, flagged.text
     np.testing.assert_allclose(flagged.json()["eigenvalues"], [5.7832, 14.682, 14.682], rtol=0.05)
-    in_ply = post(client, "d.ply", ascii_ply(points, boundary=np.isin(np.arange(len(points)), rim)),
-                  k=3)
+    in_ply = post(client, "d.ply", ascii_ply(points, boundary=np.isin(np.arange(len(points)), rim)), k=3)
     np.testing.assert_allclose(in_ply.json()["eigenvalues"], flagged.json()["eigenvalues"])
 
 
 @pytest.mark.parametrize(
     ("name", "data", "slug"),
     [
-        ("broken.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\nnot numbers",
-         "unreadable-file"),
+        ("broken.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\nnot numbers", "unreadable-file"),
         ("garbage.obj", bytes(range(256)) * 4, "unreadable-file"),
-        ("nan.ply", ascii_ply(np.array([[0, 0, np.nan], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]])),
-         "invalid-geometry"),
-        ("inf.ply", ascii_ply(np.array([[0, 0, np.inf], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]])),
-         "invalid-geometry"),
+        (
+            "nan.ply",
+            ascii_ply(np.array([[0, 0, np.nan], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]])),
+            "invalid-geometry",
+        ),
+        (
+            "inf.ply",
+            ascii_ply(np.array([[0, 0, np.inf], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]])),
+            "invalid-geometry",
+        ),
         ("out_of_range.ply", ascii_ply(TRIANGLE, np.array([[0, 1, 7]])), "invalid-geometry"),
         ("negative.ply", ascii_ply(TRIANGLE, np.array([[0, 1, -2]])), "invalid-geometry"),
         ("one_triangle.ply", ascii_ply(TRIANGLE, np.array([[0, 1, 2]])), "invalid-geometry"),
-        ("flat.ply", ascii_ply(np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]]),
-                               np.array([[0, 1, 2], [1, 2, 3]])), "invalid-geometry"),
+        (
+            "flat.ply",
+            ascii_ply(np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]]), np.array([[0, 1, 2], [1, 2, 3]])),
+            "invalid-geometry",
+        ),
     ],
 )
 def test_bad_files_get_a_422_problem(client, name, data, slug):
@@ -126,8 +133,7 @@ def test_zip_sent_under_an_allowed_name_does_not_parse(client, patch):
 
 def test_chunked_upload_over_the_cap_gets_413(client):
     boundary = "cap-test"
-    head = (f"--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; "
-            f"filename=\"big.ply\"\r\n\r\n").encode()
+    head = (f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="big.ply"\r\n\r\n').encode()
 
     def body():
         yield head
@@ -135,7 +141,8 @@ def test_chunked_upload_over_the_cap_gets_413(client):
             yield b"0" * 65536
 
     response = client.post(
-        "/v1/spectrum", content=body(),
+        "/v1/spectrum",
+        content=body(),
         headers={"content-type": f"multipart/form-data; boundary={boundary}"},
     )
     assert "content-length" not in response.request.headers
@@ -149,8 +156,7 @@ def test_declared_length_over_the_cap_gets_413(client):
 
 @pytest.mark.parametrize("k", [0, 201, "many"])
 def test_k_out_of_range_gets_422(client, patch, k):
-    body = assert_problem(post(client, "p.ply", ascii_ply(patch.vertices, patch.faces), k=k),
-                          422, "invalid-request")
+    body = assert_problem(post(client, "p.ply", ascii_ply(patch.vertices, patch.faces), k=k), 422, "invalid-request")
     assert "k" in body["detail"]
 
 

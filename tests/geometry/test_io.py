@@ -26,8 +26,14 @@ def spectrum(data: bytes, file_type: str, **options) -> np.ndarray:
 
 @pytest.mark.parametrize(
     ("file_type", "kwargs"),
-    [("ply", {"encoding": "ascii"}), ("ply", {"encoding": "binary"}), ("obj", {}),
-     ("off", {}), ("stl", {}), ("glb", {})],
+    [
+        ("ply", {"encoding": "ascii"}),
+        ("ply", {"encoding": "binary"}),
+        ("obj", {}),
+        ("off", {}),
+        ("stl", {}),
+        ("glb", {}),
+    ],
 )
 def test_mesh_formats_round_trip_to_the_same_spectrum(patch, file_type, kwargs):
     expected = spectrum(ascii_ply(patch.vertices, patch.faces), "ply")
@@ -48,8 +54,7 @@ def test_stl_duplicate_vertices_are_merged(patch):
 def test_point_cloud_formats_round_trip(patch):
     points = patch.vertices
     as_text = "\n".join(" ".join(f"{c:.17g}" for c in p) for p in points).encode()
-    for data, file_type in [(ascii_ply(points), "ply"), (as_text, "xyz"), (as_text, "txt"),
-                            (npy_bytes(points), "npy")]:
+    for data, file_type in [(ascii_ply(points), "ply"), (as_text, "xyz"), (as_text, "txt"), (npy_bytes(points), "npy")]:
         cloud = load_shape(data, file_type, max_vertices=CAP)
         assert isinstance(cloud, PointCloud)
         np.testing.assert_allclose(cloud.points, points, rtol=1e-12)
@@ -107,7 +112,9 @@ def test_zip_named_as_ply_does_not_parse(patch):
 
 
 def test_ply_header_with_a_billion_vertices_is_refused_before_parsing():
-    header = b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000\n" \
-             b"property float x\nproperty float y\nproperty float z\nend_header\n"
+    header = (
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000\n"
+        b"property float x\nproperty float y\nproperty float z\nend_header\n"
+    )
     with pytest.raises(TooManyVertices):
         load_shape(header + b"\0" * 120, "ply", max_vertices=CAP)

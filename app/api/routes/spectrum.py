@@ -45,7 +45,10 @@ async def spectrum(
         max_hole_edges=settings.max_hole_edges,
     )
     return await anyio.to_thread.run_sync(
-        spectrum_from_bytes, data, resolved_type, options,
+        spectrum_from_bytes,
+        data,
+        resolved_type,
+        options,
         limiter=request.app.state.solver_limiter,
     )
 
@@ -57,8 +60,6 @@ def _parse_indices(text: str | None) -> list[int] | None:
         indices = json.loads(text)
     except json.JSONDecodeError as exc:
         raise InvalidGeometry(f"boundary must be a JSON list of integers: {exc}") from exc
-    if not isinstance(indices, list) or not all(
-        isinstance(i, int) and not isinstance(i, bool) for i in indices
-    ):
+    if not isinstance(indices, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in indices):
         raise InvalidGeometry("boundary must be a JSON list of integers")
     return indices
