@@ -157,8 +157,9 @@ def _flip(t: _Triangulation, edges: np.ndarray) -> None:
     o_next, o_prev = 3 * f2 + (o + 1) % 3, 3 * f2 + (o + 2) % 3  # a→d, d→b
     a, b = t.faces[f1, h % 3], t.faces[f2, o % 3]
     c, d = t.faces[f1, (h + 2) % 3], t.faces[f2, (o + 2) % 3]
-    new_length = _diagonal_length(t.lengths[h], t.lengths[h_prev], t.lengths[h_next],
-                                  t.lengths[o_next], t.lengths[o_prev])
+    new_length = _diagonal_length(
+        t.lengths[h], t.lengths[h_prev], t.lengths[h_next], t.lengths[o_next], t.lengths[o_prev]
+    )
     old = np.concatenate([h_prev, o_next, h, o_prev, h_next, o])
     new = np.concatenate([3 * f1, 3 * f1 + 1, 3 * f1 + 2, 3 * f2, 3 * f2 + 1, 3 * f2 + 2])
     remap = np.arange(len(t.twin))
@@ -173,9 +174,7 @@ def _flip(t: _Triangulation, edges: np.ndarray) -> None:
     t.faces[f2] = np.column_stack([d, b, c])
 
 
-def _diagonal_length(
-    ab: np.ndarray, ca: np.ndarray, bc: np.ndarray, ad: np.ndarray, db: np.ndarray
-) -> np.ndarray:
+def _diagonal_length(ab: np.ndarray, ca: np.ndarray, bc: np.ndarray, ad: np.ndarray, db: np.ndarray) -> np.ndarray:
     """|cd| in the quad unfolded about a–b: the law of cosines with the angle at a summed."""
     area1 = _heron(ab, bc, ca)
     area2 = _heron(ab, db, ad)

@@ -79,8 +79,9 @@ def test_those_meshes_are_not_delaunay_to_begin_with(mesh):
 def test_non_manifold_mesh_falls_back_to_robust_laplacian():
     mesh = disk(rings=6)
     a, b = mesh.faces[0, 0], mesh.faces[0, 1]
-    fin = Mesh(np.vstack([mesh.vertices, [[0.0, 0.0, 1.0]]]),
-               np.vstack([mesh.faces, [[a, b, len(mesh.vertices)]]]))  # a third face on edge a–b
+    fin = Mesh(
+        np.vstack([mesh.vertices, [[0.0, 0.0, 1.0]]]), np.vstack([mesh.faces, [[a, b, len(mesh.vertices)]]])
+    )  # a third face on edge a–b
     assert intrinsic_delaunay_operators(fin.vertices, fin.faces, MOLLIFY_FACTOR) is None
     ours = mesh_operators(fin.vertices, fin.faces)
     stiffness, _ = robust(fin)
