@@ -33,6 +33,13 @@ def shift_for(mass: sp.spmatrix) -> float:
 
 
 def eigenvalues(operators: Operators, k: int, fixed: np.ndarray | None = None) -> np.ndarray:
+    """The ``k`` smallest eigenvalues of (S, M), ascending; see :func:`eigenpairs`."""
+    return eigenpairs(operators, k, fixed, vectors=False)[0]
+
+
+def eigenpairs(
+    operators: Operators, k: int, fixed: np.ndarray | None = None, *, vectors: bool = True
+) -> tuple[np.ndarray, np.ndarray | None]:
     """The ``k`` smallest eigenvalues of (S, M), ascending, with x = 0 on ``fixed`` vertices.
 
     Parameters
@@ -44,9 +51,13 @@ def eigenvalues(operators: Operators, k: int, fixed: np.ndarray | None = None) -
     fixed : (n,) bool array or None
         Dirichlet vertices, removed from the system; None for a closed shape.
 
+    vectors : bool
+        Also return the eigenfunctions (the training package needs the template's).
+
     Returns
     -------
-    (k,) float64 array, non-decreasing, in the inverse squared units of the shape.
+    values : (k,) float64 array, non-decreasing, in the inverse squared units of the shape.
+    functions : (n_free, k) array, M-orthonormal, or None without ``vectors``.
 
     Raises
     ------
@@ -72,7 +83,7 @@ def eigenvalues(operators: Operators, k: int, fixed: np.ndarray | None = None) -
         factor = qdldl.Solver(shifted)
         inverse = sla.LinearOperator((n, n), matvec=factor.solve, dtype=np.float64)
         start = np.random.default_rng(0).standard_normal(n)
-        values = sla.eigsh(
+        result = sla.eigsh(
             standard,
             k=k,
             sigma=sigma,
@@ -80,8 +91,13 @@ def eigenvalues(operators: Operators, k: int, fixed: np.ndarray | None = None) -
             which="LM",
             v0=start,
             tol=ARPACK_TOL,
-            return_eigenvectors=False,
+            return_eigenvectors=vectors,
         )
     except (ValueError, sla.ArpackError) as exc:
         raise SolverFailure(f"the eigen-solver failed on this shape: {exc}") from exc
-    return np.sort(values)
+    if not vectors:
+        return np.sort(result), None
+    values, standard_vectors = result
+    order = np.argsort(values)
+    # x = M^-1/2 y turns orthonormal eigenvectors of C into M-orthonormal ones of (S, M).
+    return values[order], inv_sqrt @ standard_vectors[:, order]
