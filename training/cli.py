@@ -10,6 +10,11 @@ from training.data.build import PRESETS, build_dataset
 cli = typer.Typer(no_args_is_help=True, add_completion=False)
 
 
+@cli.callback()
+def training() -> None:
+    """Data and models for spectral-unions (needs the 'train' extra: torch, anny)."""
+
+
 @cli.command("build-dataset")
 def build_dataset_command(
     out: Annotated[Path, typer.Option(help="Data set directory (resumes if it exists).")] = Path("data/standard"),

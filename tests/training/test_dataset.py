@@ -1,0 +1,141 @@
+"""The data set build on a synthetic body (no anny needed): determinism, masks, rules, splits."""
+
+import shutil
+
+import numpy as np
+import pytest
+
+from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
+from app.geometry.shapes import Mesh
+from tests.training.synthetic import SyntheticSource, synthetic_template
+from training.data.build import PRESETS, TEST_B_MAX_IOU, build_dataset
+from training.data.pairs import AREA_TIE, MIN_GAIN, symmetric_iou
+from training.data.regions import MAX_AREA_FRACTION, MIN_AREA_FRACTION, RegionSampler
+from training.data.spectra import region_mesh
+
+PRESET = PRESETS["tiny"]
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    out = tmp_path_factory.mktemp("tiny")
+    build_dataset(SyntheticSource(), PRESET, out, seed=0, workers=2)
+    return out
+
+
+@pytest.fixture(scope="module")
+def data(built):
+    return dict(np.load(built / "dataset.npz"))
+
+
+@pytest.fixture(scope="module")
+def sampler():
+    return RegionSampler(synthetic_template())
+
+
+def unpack(data, index):
+    return np.unpackbits(data["masks"][index], count=len(synthetic_template().vertices)).astype(bool)
+
+
+def test_same_seed_same_data(built, data, tmp_path):
+    build_dataset(SyntheticSource(), PRESET, tmp_path, seed=0, workers=1)
+    again = np.load(tmp_path / "dataset.npz")
+    assert set(again.files) == set(data)
+    for key in data:
+        np.testing.assert_array_equal(again[key], data[key], err_msg=key)
+
+
+def test_no_spectrum_failed(data):
+    assert not np.isnan(data["spectra"]).any()
+
+
+def test_every_part_is_one_component_with_a_boundary(data, sampler):
+    for index in np.unique(np.concatenate([data["mask_a"], data["mask_b"]])):
+        mask = unpack(data, index)
+        assert sampler.is_connected(mask)
+        assert MIN_AREA_FRACTION <= sampler.area_fraction(mask) <= MAX_AREA_FRACTION
+
+
+def test_union_is_the_or_of_its_parts(data):
+    for a, b, union, scenario in zip(data["mask_a"], data["mask_b"], data["mask_union"], data["scenario"], strict=True):
+        both = unpack(data, a) | unpack(data, b)
+        if scenario == "full":
+            assert union == 0 and both.all()
+        else:
+            np.testing.assert_array_equal(unpack(data, union), both)
+
+
+def test_neither_part_contains_the_other(data, sampler):
+    for a, b, union in zip(data["mask_a"], data["mask_b"], data["mask_union"], strict=True):
+        gain = sampler.area_fraction(unpack(data, union)) - max(
+            sampler.area_fraction(unpack(data, a)), sampler.area_fraction(unpack(data, b))
+        )
+        assert gain >= MIN_GAIN - 1e-9
+
+
+def test_minimum_union_area_rule(data, sampler):
+    mirror = sampler.template.mirror
+    for a, b in zip(data["mask_a"], data["mask_b"], strict=True):
+        a, b = unpack(data, a), unpack(data, b)
+        assert sampler.area_fraction(a | b) <= sampler.area_fraction(a | b[mirror]) + AREA_TIE
+
+
+def test_splits_keep_held_out_identities_and_poses_out_of_training(data, built):
+    import json
+
+    identities = json.loads((built / "work" / "identities.json").read_text())
+    group_of_shape = np.repeat([m["group"] for m in identities], PRESET.poses)
+    train = data["split"] == "train"
+    for column in ("shape_a", "shape_b"):
+        assert set(group_of_shape[data[column][train]]) <= {"known_man", "known_woman"}
+        assert np.all(data[column][train] % PRESET.poses < PRESET.poses - PRESET.test_poses)
+        known_test = (data["split"] != "train") & np.char.startswith(data["group"].astype(str), "known")
+        assert np.all(data[column][known_test] % PRESET.poses >= PRESET.poses - PRESET.test_poses)
+
+
+def test_test_b_unions_were_never_seen_in_training(data, sampler):
+    n = len(sampler.template.vertices)
+    train = (data["split"] == "train") & (data["scenario"] == "partial")
+    seen = np.array([unpack(data, i) for i in data["mask_union"][train]]).reshape(-1, n)
+    test_b = np.array([unpack(data, i) for i in data["mask_union"][data["split"] == "test_b"]])
+    assert len(test_b) > 0
+    assert np.all(symmetric_iou(test_b, seen, sampler.vertex_area, sampler.template.mirror) < TEST_B_MAX_IOU)
+
+
+def test_a_union_has_no_larger_eigenvalue_than_its_parts(data):
+    same_shape = (data["shape_a"] == data["shape_b"]) & (data["variant"] == "mesh")
+    assert same_shape.any()
+    spectra = data["spectra"]
+    for row in np.flatnonzero(same_shape):
+        union = spectra[data["spec_union"][row]]
+        parts = np.minimum(spectra[data["spec_a"][row]], spectra[data["spec_b"][row]])
+        assert np.all(union <= parts * 1.01 + 1e-9), row
+
+
+def test_spectrum_of_the_extracted_submesh_equals_the_region_of_the_full_mesh(sampler):
+    template = sampler.template
+    mask = sampler.sample(np.random.default_rng(3)).mask
+    inside = template.faces[mask[template.faces].all(axis=1)]
+    as_region = mesh_spectrum(Mesh(template.vertices, inside), SpectrumOptions(k=10)).eigenvalues
+    as_submesh = mesh_spectrum(region_mesh(template.vertices, template.faces, mask), SpectrumOptions(k=10)).eigenvalues
+    np.testing.assert_allclose(as_submesh, as_region, rtol=1e-10)
+
+
+def test_a_killed_build_resumes_without_recomputing_finished_chunks(built, data, tmp_path):
+    copy = tmp_path / "copy"
+    shutil.copytree(built, copy)
+    chunks = sorted((copy / "work").glob("spectra-*.npz"))
+    chunks[-1].unlink()
+    (copy / "dataset.npz").unlink()
+    finished = {path: path.stat().st_mtime_ns for path in chunks[:-1]}
+    build_dataset(SyntheticSource(), PRESET, copy, seed=0, workers=1)
+    assert all(path.stat().st_mtime_ns == mtime for path, mtime in finished.items())
+    np.testing.assert_array_equal(np.load(copy / "dataset.npz")["spectra"], data["spectra"])
+
+
+def test_dask_cluster_builds_the_same_data(data, tmp_path):
+    import distributed
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        build_dataset(SyntheticSource(), PRESET, tmp_path, seed=0, scheduler=cluster.scheduler_address)
+    np.testing.assert_array_equal(np.load(tmp_path / "dataset.npz")["spectra"], data["spectra"])
