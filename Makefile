@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test lint bench
+.PHONY: run test test-train lint bench dataset
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -17,8 +17,18 @@ run: $(BIN)/.installed  ## set up and serve on 127.0.0.1:8000
 test: $(BIN)/.installed  ## set up and run the test suite
 	$(BIN)/python -m pytest -q
 
+$(BIN)/.train: $(BIN)/.installed
+	$(BIN)/python -m pip install --quiet -e '.[dev,train]'
+	touch $@
+
+test-train: $(BIN)/.train  ## the suite plus the tests that need anny (the 'train' extra)
+	$(BIN)/python -m pytest -q
+
+dataset: $(BIN)/.train  ## the benchmark data set (PRESET=tiny|standard|large)
+	$(BIN)/spectral-unions-train build-dataset --preset $(or $(PRESET),standard) --out data/$(or $(PRESET),standard)
+
 lint: $(BIN)/.installed
 	$(BIN)/ruff check app training tests benchmarks
 
-bench: $(BIN)/.installed  ## spectrum speed against LaPy (needs the anny body: pip install -e '.[train]')
+bench: $(BIN)/.train  ## spectrum speed against LaPy on anny bodies
 	$(BIN)/python benchmarks/bench_spectrum.py

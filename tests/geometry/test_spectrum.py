@@ -7,7 +7,7 @@ import scipy.sparse.linalg as sla
 from app.geometry.laplacian import mesh_operators
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
-from app.geometry.spectrum import eigenvalues, shift_for
+from app.geometry.spectrum import eigenpairs, eigenvalues, shift_for
 from app.geometry.topology import boundary_vertex_mask
 from tests.conftest import disk, grid, sphere
 
@@ -109,3 +109,12 @@ def test_largest_component_by_area_is_kept():
     report = mesh_spectrum(both, SpectrumOptions(k=8))
     assert report.components_dropped == 1
     np.testing.assert_allclose(report.eigenvalues, spectrum_of(big, k=8), rtol=1e-8)
+
+
+def test_eigenfunctions_are_mass_orthonormal_and_solve_the_pencil(patch):
+    operators = mesh_operators(patch.vertices, patch.faces)
+    values, functions = eigenpairs(operators, 8)
+    gram = functions.T @ operators.mass @ functions
+    np.testing.assert_allclose(gram, np.eye(8), atol=1e-8)
+    residual = operators.stiffness @ functions - operators.mass @ functions * values
+    assert np.abs(residual).max() < 1e-8 * values.max()

@@ -139,3 +139,17 @@ def test_dask_cluster_builds_the_same_data(data, tmp_path):
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         build_dataset(SyntheticSource(), PRESET, tmp_path, seed=0, scheduler=cluster.scheduler_address)
     np.testing.assert_array_equal(np.load(tmp_path / "dataset.npz")["spectra"], data["spectra"])
+
+
+def test_sample_files_reproduce_their_stored_spectra_through_the_service_code(built):
+    import json
+
+    from app.geometry.pipeline import spectrum_from_bytes
+
+    index = json.loads((built / "samples" / "samples.json").read_text())
+    checked = [entry for entry in index if entry["eigenvalues"] is not None]
+    assert {entry["variant"] for entry in checked} >= {"mesh", "remeshed"}
+    for entry in checked:
+        data = (built / "samples" / entry["file"]).read_bytes()
+        report = spectrum_from_bytes(data, "ply", SpectrumOptions(k=PRESET.k))
+        np.testing.assert_allclose(report.eigenvalues, entry["eigenvalues"], rtol=1e-8, err_msg=entry["file"])
