@@ -1,0 +1,1 @@
+"""The deformable-human benchmark data built from the ``anny`` body model."""

