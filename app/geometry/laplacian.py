@@ -13,6 +13,7 @@ import numpy as np
 import robust_laplacian
 import scipy.sparse as sp
 
+from app.geometry.errors import InvalidGeometry
 from app.geometry.intrinsic import intrinsic_delaunay_operators
 
 # robust-laplacian's defaults, restated so the fast path refuses exactly what it would mollify.
@@ -43,19 +44,27 @@ def mesh_operators(vertices: np.ndarray, faces: np.ndarray) -> Operators:
     fast = intrinsic_delaunay_operators(vertices, faces, MOLLIFY_FACTOR)
     if fast is not None:
         return Operators(*fast)
-    stiffness, mass = robust_laplacian.mesh_laplacian(
-        np.ascontiguousarray(vertices, dtype=np.float64),
-        np.ascontiguousarray(faces, dtype=np.int64),
-        mollify_factor=MOLLIFY_FACTOR,
-    )
+    try:
+        stiffness, mass = robust_laplacian.mesh_laplacian(
+            np.ascontiguousarray(vertices, dtype=np.float64),
+            np.ascontiguousarray(faces, dtype=np.int64),
+            mollify_factor=MOLLIFY_FACTOR,
+        )
+    except RuntimeError as exc:  # the C++ core reports unusable input this way
+        raise InvalidGeometry(f"cannot build a Laplacian for this mesh: {exc}") from exc
     return Operators(stiffness.tocsr(), mass.tocsr())
 
 
 def point_cloud_operators(points: np.ndarray) -> Operators:
     """Point-cloud Laplacian of robust-laplacian (tufted local Delaunay triangulations)."""
-    stiffness, mass = robust_laplacian.point_cloud_laplacian(
-        np.ascontiguousarray(points, dtype=np.float64),
-        mollify_factor=MOLLIFY_FACTOR,
-        n_neighbors=POINT_CLOUD_NEIGHBOURS,
-    )
+    if len(points) <= POINT_CLOUD_NEIGHBOURS:
+        raise InvalidGeometry(f"a point cloud needs more than {POINT_CLOUD_NEIGHBOURS} points, got {len(points)}")
+    try:
+        stiffness, mass = robust_laplacian.point_cloud_laplacian(
+            np.ascontiguousarray(points, dtype=np.float64),
+            mollify_factor=MOLLIFY_FACTOR,
+            n_neighbors=POINT_CLOUD_NEIGHBOURS,
+        )
+    except RuntimeError as exc:
+        raise InvalidGeometry(f"cannot build a Laplacian for this point cloud: {exc}") from exc
     return Operators(stiffness.tocsr(), mass.tocsr())

@@ -395,7 +395,8 @@ def _card(manifest: dict) -> str:
         f"- identities: {manifest['identities']} ({preset['known_men']} known men, {preset['known_women']} known "
         f"women, {preset['unknown_men']} unknown men, {preset['unknown_women']} unknown women, "
         f"{preset['children']} children) × {preset['poses']} poses = {manifest['shapes']} shapes",
-        f"- pair rows: {manifest['rows']}; triples: {manifest['triples']}; distinct masks: {manifest['distinct_masks']}",
+        f"- pair rows: {manifest['rows']}; triples: {manifest['triples']}; "
+        f"distinct masks: {manifest['distinct_masks']}",
         f"- spectra: {manifest['spectra']} (k = {preset['k']}), failed: {manifest['failed_spectra']}",
         f"- size: {manifest['bytes'] / 1e6:.1f} MB (`dataset.npz`); build time: {manifest['build_seconds']} s",
         "",
