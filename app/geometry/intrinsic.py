@@ -99,9 +99,7 @@ def _half_edge_mesh(faces: np.ndarray, lengths: np.ndarray) -> _Triangulation | 
 def _face_geometry(t: _Triangulation, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Edge lengths (k, 3) in half-edge order and Heron areas (k,) of the given faces."""
     lengths = t.lengths[3 * faces[:, None] + np.arange(3)]
-    s = lengths.sum(axis=1) / 2
-    product = s * (s - lengths[:, 0]) * (s - lengths[:, 1]) * (s - lengths[:, 2])
-    return lengths, np.sqrt(np.maximum(product, 0.0))
+    return lengths, _heron(lengths[:, 0], lengths[:, 1], lengths[:, 2])
 
 
 def _cotangents(t: _Triangulation, faces: np.ndarray) -> np.ndarray:

@@ -39,7 +39,7 @@ def boundary_vertex_mask(faces: np.ndarray, n_vertices: int) -> np.ndarray:
 
 
 def largest_component(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, int]:
-    """Faces of the largest edge-connected component by area, and how many others were dropped.
+    """Faces of the largest connected component by area, and how many others were dropped.
 
     Components are joined through shared vertices; area, not vertex count, decides, because a
     scan's dense fragment can out-count a coarser main surface.
