@@ -86,6 +86,15 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
     return loops
 
 
+def cap_faces(loop: np.ndarray, centre: int) -> np.ndarray:
+    """Fan of triangles closing a boundary ``loop`` (from :func:`boundary_loops`) at vertex ``centre``.
+
+    A boundary half-edge a→b lies in a face ordered a→b; each cap face uses b→a, so the capped
+    surface stays consistently oriented.
+    """
+    return np.column_stack([np.roll(loop, -1), loop, np.full(len(loop), centre)])
+
+
 def fill_small_holes(
     vertices: np.ndarray, faces: np.ndarray, max_edges: int, max_relative_perimeter: float = 0.2
 ) -> tuple[np.ndarray, np.ndarray, int]:
@@ -111,9 +120,7 @@ def fill_small_holes(
         if len(loop) > max_edges or perimeter > max_relative_perimeter * scale:
             continue
         new_vertices.append(ring.mean(axis=0, keepdims=True))
-        # A boundary half-edge a→b lies in a face ordered a→b; the cap uses b→a to match.
-        nxt = np.roll(loop, -1)
-        new_faces.append(np.column_stack([nxt, loop, np.full(len(loop), next_index)]))
+        new_faces.append(cap_faces(loop, next_index))
         next_index += 1
         filled += 1
     return np.concatenate(new_vertices), np.concatenate(new_faces), filled

@@ -13,14 +13,21 @@ from training.data.template import TOPOLOGY, CappedTopology, capped_topology
 
 # (bone, axis, low°, high°) for the left side; the right side mirrors it (x kept, y and z negated).
 POSE_RANGES: tuple[tuple[str, str, float, float], ...] = (
-    ("upperarm01", "x", -60, 40), ("upperarm01", "y", -60, 25), ("upperarm01", "z", -30, 30),
+    ("upperarm01", "x", -60, 40),
+    ("upperarm01", "y", -60, 25),
+    ("upperarm01", "z", -30, 30),
     ("lowerarm01", "x", -70, 0),
-    ("upperleg01", "x", -60, 20), ("upperleg01", "y", -10, 25),
+    ("upperleg01", "x", -60, 20),
+    ("upperleg01", "y", -10, 25),
     ("lowerleg01", "x", 0, 70),
 )
 CENTRAL_RANGES: tuple[tuple[str, str, float, float], ...] = (
-    ("spine02", "x", -15, 15), ("spine02", "y", -10, 10), ("spine02", "z", -20, 20),
-    ("neck01", "x", -20, 20), ("neck01", "y", -20, 20), ("neck01", "z", -30, 30),
+    ("spine02", "x", -15, 15),
+    ("spine02", "y", -10, 10),
+    ("spine02", "z", -20, 20),
+    ("neck01", "x", -20, 20),
+    ("neck01", "y", -20, 20),
+    ("neck01", "z", -30, 30),
 )
 GENDER_RANGE = {"man": (0.0, 0.3), "woman": (0.7, 1.0)}
 ADULT_AGES = (18.0, 70.0)
@@ -67,9 +74,7 @@ class BodyModel:
             ),
         )
         _, sampled = distribution.sample(count)
-        return [
-            Identity({k: float(v[i]) for k, v in sampled.items()}, label, group) for i in range(count)
-        ]
+        return [Identity({k: float(v[i]) for k, v in sampled.items()}, label, group) for i in range(count)]
 
     def random_pose(self, rng: np.random.Generator) -> np.ndarray:
         """(bones, 4, 4) per-bone rotations about each bone head, world-aligned axes."""
@@ -87,28 +92,23 @@ class BodyModel:
 
     def pose(self, identity: Identity, poses: np.ndarray) -> np.ndarray:
         """(p, n_capped, 3) capped-body vertices of ``identity`` in each of ``poses``."""
+        return self.topology.vertices(self._anny_vertices(identity, poses).cpu().numpy())
+
+    def collides(self, identity: Identity, pose: np.ndarray) -> bool:
+        """Whether the posed anny mesh intersects itself (such poses are rejected)."""
+        vertices = self._anny_vertices(identity, pose[None])[0]
+        return bool((self.collisions.detect_self_intersections(vertices) >= 0).any())
+
+    def _anny_vertices(self, identity: Identity, poses: np.ndarray):
+        """(p, n_anny, 3) torch tensor of anny's own posed vertices."""
         import torch
 
         count = len(poses)
         phenotype = {k: torch.full((count,), v, dtype=self.model.dtype) for k, v in identity.phenotype.items()}
         with torch.no_grad():
-            out = self.model(
-                pose_parameters=torch.as_tensor(poses, dtype=self.model.dtype),
-                phenotype_kwargs=phenotype,
-            )
-        return self.topology.vertices(out["vertices"].cpu().numpy())
-
-    def collides(self, identity: Identity, pose: np.ndarray) -> bool:
-        """Whether the posed anny mesh intersects itself (such poses are rejected)."""
-        import torch
-
-        phenotype = {k: torch.tensor([v], dtype=self.model.dtype) for k, v in identity.phenotype.items()}
-        with torch.no_grad():
-            vertices = self.model(
-                pose_parameters=torch.as_tensor(pose[None], dtype=self.model.dtype),
-                phenotype_kwargs=phenotype,
-            )["vertices"][0]
-        return bool((self.collisions.detect_self_intersections(vertices) >= 0).any())
+            return self.model(
+                pose_parameters=torch.as_tensor(poses, dtype=self.model.dtype), phenotype_kwargs=phenotype
+            )["vertices"]
 
     def valid_poses(self, identity: Identity, rng: np.random.Generator, count: int, rest_first: bool) -> np.ndarray:
         """``count`` random poses without self-intersection (the rest pose first if asked)."""

@@ -23,7 +23,7 @@ from tqdm import tqdm
 from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION, sample_pair, sample_triple, symmetric_iou
 from training.data.regions import RegionSampler
 from training.data.samples import export_samples
-from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
+from training.data.spectra import CLOUD, MESH, REMESHED, VARIANTS, task_spectrum
 from training.data.template import Template
 
 TEST_B_MAX_IOU = 0.8  # a Test B union overlaps every training union (or its mirror) less than this
@@ -50,12 +50,39 @@ class Preset:
 
 
 PRESETS = {
-    "tiny": Preset("tiny", 2, 1, 1, 1, 1, poses=3, test_poses=1, train_pairs=24, test_pairs=2,
-                   triples=4, cloud_parts=2, chunk=8),
-    "standard": Preset("standard", 25, 25, 5, 5, 3, poses=10, test_poses=2, train_pairs=20_000,
-                       test_pairs=150, triples=1_000, cloud_parts=100, chunk=64),
-    "large": Preset("large", 100, 100, 10, 10, 5, poses=12, test_poses=2, train_pairs=100_000,
-                    test_pairs=500, triples=5_000, cloud_parts=500, chunk=128),
+    "tiny": Preset(
+        "tiny", 2, 1, 1, 1, 1, poses=3, test_poses=1, train_pairs=24, test_pairs=2, triples=4, cloud_parts=2, chunk=8
+    ),
+    "standard": Preset(
+        "standard",
+        25,
+        25,
+        5,
+        5,
+        3,
+        poses=10,
+        test_poses=2,
+        train_pairs=20_000,
+        test_pairs=150,
+        triples=1_000,
+        cloud_parts=100,
+        chunk=64,
+    ),
+    "large": Preset(
+        "large",
+        100,
+        100,
+        10,
+        10,
+        5,
+        poses=12,
+        test_poses=2,
+        train_pairs=100_000,
+        test_pairs=500,
+        triples=5_000,
+        cloud_parts=500,
+        chunk=128,
+    ),
 }
 
 
@@ -108,7 +135,8 @@ def _sampler(template_dir: str) -> RegionSampler:
 
 
 @lru_cache(maxsize=2)
-def _shapes(path: str) -> np.ndarray:
+def _mapped(path: str) -> np.ndarray:
+    """A saved array, memory-mapped once per worker process."""
     return np.load(path, mmap_mode="r")
 
 
@@ -131,12 +159,13 @@ def draw_masks(template_dir: str, seed: int, chunk: int, kind: str, count: int) 
     return {"masks": np.packbits(np.array(rows), axis=-1), "scenario": np.array(scenarios)}
 
 
-def solve_chunk(template_dir: str, shapes_path: str, masks_path: str, tasks: np.ndarray,
-                variants: np.ndarray, k: int) -> np.ndarray:
+def solve_chunk(
+    template_dir: str, shapes_path: str, masks_path: str, tasks: np.ndarray, variants: np.ndarray, k: int
+) -> np.ndarray:
     """Spectra (len(tasks), k) of (shape, mask) rows of ``tasks`` in their variants."""
     template = Template.load(Path(template_dir))
-    shapes = _shapes(shapes_path)
-    packed = _shapes(masks_path)
+    shapes = _mapped(shapes_path)
+    packed = _mapped(masks_path)
     n = len(template.vertices)
     out = np.empty((len(tasks), k))
     for row, ((shape, mask), variant) in enumerate(zip(tasks, variants, strict=True)):
@@ -146,8 +175,14 @@ def solve_chunk(template_dir: str, shapes_path: str, masks_path: str, tasks: np.
 
 
 # --- the build -------------------------------------------------------------------------------
-def run_tasks(function: Callable, argument_lists: list[tuple], done: Callable[[int, object], None],
-              scheduler: str | None, workers: int | None, label: str) -> None:
+def run_tasks(
+    function: Callable,
+    argument_lists: list[tuple],
+    done: Callable[[int, object], None],
+    scheduler: str | None,
+    workers: int | None,
+    label: str,
+) -> None:
     """Run ``function(*arguments)`` for each item, calling ``done(index, result)`` as they finish."""
     if not argument_lists:
         return
@@ -170,8 +205,14 @@ def run_tasks(function: Callable, argument_lists: list[tuple], done: Callable[[i
     progress.close()
 
 
-def build_dataset(source: ShapeSource, preset: Preset, out: Path, seed: int = 0,
-                  scheduler: str | None = None, workers: int | None = None) -> dict:
+def build_dataset(
+    source: ShapeSource,
+    preset: Preset,
+    out: Path,
+    seed: int = 0,
+    scheduler: str | None = None,
+    workers: int | None = None,
+) -> dict:
     """Build (or resume) the data set of ``preset`` in ``out``; returns its manifest."""
     started = time.perf_counter()
     layout = Layout(out)
@@ -185,8 +226,9 @@ def build_dataset(source: ShapeSource, preset: Preset, out: Path, seed: int = 0,
     table, masks = _stage_splits(preset, identities, pairs, triples, sampler, seed)
     masks_path = layout.work / "masks.npy"
     np.save(masks_path, masks)
-    spectra = _stage_spectra(preset, layout, table, str(template_dir), str(shapes_path), str(masks_path),
-                             scheduler, workers)
+    spectra = _stage_spectra(
+        preset, layout, table, str(template_dir), str(shapes_path), str(masks_path), scheduler, workers
+    )
     manifest = _write(out, preset, seed, identities, table, masks, spectra, time.perf_counter() - started)
     export_samples(out, dict(np.load(out / "dataset.npz")), np.load(shapes_path, mmap_mode="r"), sampler.template.faces)
     return manifest
@@ -202,8 +244,9 @@ def _stage_shapes(source: ShapeSource, preset: Preset, layout: Layout, seed: int
     return path, json.loads(meta.read_text())
 
 
-def _stage_masks(preset: Preset, layout: Layout, template_dir: str, seed: int, scheduler: str | None,
-                 workers: int | None) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+def _stage_masks(
+    preset: Preset, layout: Layout, template_dir: str, seed: int, scheduler: str | None, workers: int | None
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Pairs for training and Test A, candidates for Test B, and triples, in resumable chunks."""
     test_groups = 5
     plan = {
@@ -219,22 +262,31 @@ def _stage_masks(preset: Preset, layout: Layout, template_dir: str, seed: int, s
         def save(index: int, result: dict, kind: str = kind, missing: list[int] = missing) -> None:
             np.savez(layout.chunk(kind, missing[index]), **result)
 
-        run_tasks(draw_masks, [(template_dir, seed, i, kind, counts[i]) for i in missing], save,
-                  scheduler, workers, f"masks ({kind})")
+        run_tasks(
+            draw_masks,
+            [(template_dir, seed, i, kind, counts[i]) for i in missing],
+            save,
+            scheduler,
+            workers,
+            f"masks ({kind})",
+        )
         parts = [np.load(layout.chunk(kind, i)) for i in range(len(counts))]
         results[kind] = {key: np.concatenate([p[key] for p in parts]) for key in ("masks", "scenario")}
     return {"pair": results["pair"], "candidate": results["candidate"]}, results["triple"]
 
 
-def _stage_splits(preset: Preset, identities: list[dict], pairs: dict, triples: dict, sampler: RegionSampler,
-                  seed: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def _stage_splits(
+    preset: Preset, identities: list[dict], pairs: dict, triples: dict, sampler: RegionSampler, seed: int
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Assign pairs to shapes and splits; keep Test B candidates whose union is novel."""
     rng = np.random.default_rng([seed, 2])
     template = sampler.template
     n = len(template.vertices)
     masks: list[np.ndarray] = [np.packbits(np.ones(n, bool))]  # mask 0: the whole body
-    rows: dict[str, list] = {key: [] for key in ("split", "group", "scenario", "variant", "shape_a", "shape_b",
-                                                "mask_a", "mask_b", "mask_union")}
+    rows: dict[str, list] = {
+        key: []
+        for key in ("split", "group", "scenario", "variant", "shape_a", "shape_b", "mask_a", "mask_b", "mask_union")
+    }
 
     def add_mask(packed: np.ndarray) -> int:
         masks.append(packed)
@@ -247,9 +299,17 @@ def _stage_splits(preset: Preset, identities: list[dict], pairs: dict, triples: 
         pose_b = pose_a if rng.random() < 0.5 else int(rng.choice(pose_pool))
         a, b = add_mask(packed[0]), add_mask(packed[1])
         union = 0 if scenario == FULL_COVERAGE else add_mask(packed[2])
-        for key, value in (("split", split), ("group", group), ("scenario", scenario), ("variant", MESH),
-                           ("shape_a", identity * preset.poses + pose_a), ("shape_b", identity * preset.poses + pose_b),
-                           ("mask_a", a), ("mask_b", b), ("mask_union", union)):
+        for key, value in (
+            ("split", split),
+            ("group", group),
+            ("scenario", scenario),
+            ("variant", MESH),
+            ("shape_a", identity * preset.poses + pose_a),
+            ("shape_b", identity * preset.poses + pose_b),
+            ("mask_a", a),
+            ("mask_b", b),
+            ("mask_union", union),
+        ):
             rows[key].append(value)
 
     test_groups = ["known_man", "known_woman", "unknown_man", "unknown_woman", "child"]
@@ -261,11 +321,21 @@ def _stage_splits(preset: Preset, identities: list[dict], pairs: dict, triples: 
         for j in range(preset.test_pairs):
             i = offset + g * preset.test_pairs + j
             add("test_a", group, str(pair_scenarios[i]), pair_masks[i])
-    train_unions = np.array([np.unpackbits(pair_masks[i][2], count=n) for i in range(preset.train_pairs)
-                             if pair_scenarios[i] == PARTIAL_UNION], dtype=bool).reshape(-1, n)
+    train_unions = np.array(
+        [
+            np.unpackbits(pair_masks[i][2], count=n)
+            for i in range(preset.train_pairs)
+            if pair_scenarios[i] == PARTIAL_UNION
+        ],
+        dtype=bool,
+    ).reshape(-1, n)
     candidates = pairs["candidate"]["masks"]
-    novelty = symmetric_iou(np.unpackbits(candidates[:, 2], axis=-1, count=n).astype(bool), train_unions,
-                            sampler.vertex_area, template.mirror)
+    novelty = symmetric_iou(
+        np.unpackbits(candidates[:, 2], axis=-1, count=n).astype(bool),
+        train_unions,
+        sampler.vertex_area,
+        template.mirror,
+    )
     novel = iter(np.flatnonzero(novelty < TEST_B_MAX_IOU))
     for group in test_groups:
         for _ in range(preset.test_pairs):
@@ -301,8 +371,13 @@ def _with_variants(table: dict[str, np.ndarray], preset: Preset, rng: np.random.
     return out
 
 
-def _triple_rows(triples: dict, preset: Preset, identities: list[dict], rng: np.random.Generator,
-                 add_mask: Callable[[np.ndarray], int]) -> np.ndarray:
+def _triple_rows(
+    triples: dict,
+    preset: Preset,
+    identities: list[dict],
+    rng: np.random.Generator,
+    add_mask: Callable[[np.ndarray], int],
+) -> np.ndarray:
     """(t, 7): split flag (0 train, 1 test), shape, masks a, b, c, a∪b, a∪b∪c."""
     known = [i for i, m in enumerate(identities) if m["group"].startswith("known")]
     rows = []
@@ -326,14 +401,23 @@ def _spectrum_tasks(table: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarra
     shapes = np.concatenate([c[0] for c in cells])
     masks = np.concatenate([c[1] for c in cells])
     variants = np.concatenate([c[2] for c in cells]).astype(str)
-    code = np.searchsorted(np.array(sorted({MESH, REMESHED, CLOUD})), variants)
+    names = np.array(sorted(VARIANTS))
+    code = np.searchsorted(names, variants)
     keys = np.stack([shapes, masks, code], axis=1)
     unique, inverse = np.unique(keys, axis=0, return_inverse=True)
-    return unique, np.array(sorted({MESH, REMESHED, CLOUD}))[unique[:, 2]], inverse.reshape(-1)
+    return unique, names[unique[:, 2]], inverse.reshape(-1)
 
 
-def _stage_spectra(preset: Preset, layout: Layout, table: dict, template_dir: str, shapes_path: str,
-                   masks_path: str, scheduler: str | None, workers: int | None) -> dict[str, np.ndarray]:
+def _stage_spectra(
+    preset: Preset,
+    layout: Layout,
+    table: dict,
+    template_dir: str,
+    shapes_path: str,
+    masks_path: str,
+    scheduler: str | None,
+    workers: int | None,
+) -> dict[str, np.ndarray]:
     tasks, variants, cell_task = _spectrum_tasks(table)
     chunks = list(_chunks(range(len(tasks)), preset.chunk))
     missing = [i for i in range(len(chunks)) if not layout.chunk("spectra", i).exists()]
@@ -341,35 +425,51 @@ def _stage_spectra(preset: Preset, layout: Layout, table: dict, template_dir: st
     def save(index: int, values: np.ndarray) -> None:
         np.savez(layout.chunk("spectra", missing[index]), values=values)
 
-    arguments = [(template_dir, shapes_path, masks_path, tasks[chunks[i], :2], variants[chunks[i]], preset.k)
-                 for i in missing]
+    arguments = [
+        (template_dir, shapes_path, masks_path, tasks[chunks[i], :2], variants[chunks[i]], preset.k) for i in missing
+    ]
     run_tasks(solve_chunk, arguments, save, scheduler, workers, "spectra")
     values = np.concatenate([np.load(layout.chunk("spectra", i))["values"] for i in range(len(chunks))])
-    return {"values": values, "shape": tasks[:, 0], "mask": tasks[:, 1], "variant": variants,
-            "cell_task": cell_task}
+    return {"values": values, "shape": tasks[:, 0], "mask": tasks[:, 1], "variant": variants, "cell_task": cell_task}
 
 
 def _chunks(items: Iterable[int], size: int) -> Iterable[np.ndarray]:
     items = np.asarray(list(items))
     for start in range(0, len(items), size):
-        yield items[start:start + size]
+        yield items[start : start + size]
 
 
-def _write(out: Path, preset: Preset, seed: int, identities: list[dict], table: dict, masks: np.ndarray,
-           spectra: dict, seconds: float) -> dict:
+def _write(
+    out: Path,
+    preset: Preset,
+    seed: int,
+    identities: list[dict],
+    table: dict,
+    masks: np.ndarray,
+    spectra: dict,
+    seconds: float,
+) -> dict:
     """``dataset.npz`` with every table, ``manifest.json`` and ``DATASET_CARD.md``."""
     n_rows = len(table["split"])
     n_triples = len(table["triples"])
     cell = spectra["cell_task"]
     columns = {
-        "spec_a": cell[:n_rows], "spec_b": cell[n_rows:2 * n_rows], "spec_union": cell[2 * n_rows:3 * n_rows],
+        "spec_a": cell[:n_rows],
+        "spec_b": cell[n_rows : 2 * n_rows],
+        "spec_union": cell[2 * n_rows : 3 * n_rows],
     }
-    triple_spectra = cell[3 * n_rows:].reshape(5, n_triples).T
+    triple_spectra = cell[3 * n_rows :].reshape(5, n_triples).T
     np.savez_compressed(
         out / "dataset.npz",
-        masks=masks, spectra=spectra["values"], spectrum_shape=spectra["shape"], spectrum_mask=spectra["mask"],
-        spectrum_variant=spectra["variant"], triples=table["triples"], triple_spectra=triple_spectra,
-        **{key: value for key, value in table.items() if key != "triples"}, **columns,
+        masks=masks,
+        spectra=spectra["values"],
+        spectrum_shape=spectra["shape"],
+        spectrum_mask=spectra["mask"],
+        spectrum_variant=spectra["variant"],
+        triples=table["triples"],
+        triple_spectra=triple_spectra,
+        **{key: value for key, value in table.items() if key != "triples"},
+        **columns,
     )
     failed = int(np.isnan(spectra["values"]).any(axis=1).sum())
     counts: dict[str, int] = {}
@@ -377,9 +477,17 @@ def _write(out: Path, preset: Preset, seed: int, identities: list[dict], table: 
         key = f"{split}/{group}/{variant}"
         counts[key] = counts.get(key, 0) + 1
     manifest = {
-        "preset": asdict(preset), "seed": seed, "identities": len(identities), "shapes": len(identities) * preset.poses,
-        "rows": n_rows, "triples": n_triples, "distinct_masks": len(masks), "spectra": len(spectra["values"]),
-        "failed_spectra": failed, "counts": dict(sorted(counts.items())), "build_seconds": round(seconds, 1),
+        "preset": asdict(preset),
+        "seed": seed,
+        "identities": len(identities),
+        "shapes": len(identities) * preset.poses,
+        "rows": n_rows,
+        "triples": n_triples,
+        "distinct_masks": len(masks),
+        "spectra": len(spectra["values"]),
+        "failed_spectra": failed,
+        "counts": dict(sorted(counts.items())),
+        "build_seconds": round(seconds, 1),
         "bytes": (out / "dataset.npz").stat().st_size,
     }
     (out / "manifest.json").write_text(json.dumps(manifest, indent=1))

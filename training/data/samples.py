@@ -60,8 +60,15 @@ def export_samples(out: Path, data: dict, shapes: np.ndarray, faces: np.ndarray,
             for variant, (name, payload) in files.items():
                 (folder / name).write_bytes(payload)
                 mask_index = int(data[f"mask_{part}"][row])
-                index.append({"file": name, "variant": variant, "shape": shape, "mask": mask_index,
-                              "eigenvalues": _stored(data, shape, mask_index, variant)})
+                index.append(
+                    {
+                        "file": name,
+                        "variant": variant,
+                        "shape": shape,
+                        "mask": mask_index,
+                        "eigenvalues": _stored(data, shape, mask_index, variant),
+                    }
+                )
     (folder / "samples.json").write_text(json.dumps(index, indent=1))
     return index
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.geometry.topology import boundary_loops
+from app.geometry.topology import boundary_loops, cap_faces
 
 TOPOLOGY = "anny-noeyes-notongue"
 
@@ -108,12 +108,8 @@ def capped_topology(model) -> CappedTopology:
     kept, faces = np.unique(faces, return_inverse=True)
     faces = faces.reshape(-1, 3)
     loops = boundary_loops(faces)
-    caps, cap_faces = [], []
-    for number, loop in enumerate(loops):
-        centre = len(kept) + number
-        cap_faces.append(np.column_stack([np.roll(loop, -1), loop, np.full(len(loop), centre)]))
-        caps.append(loop)
-    return CappedTopology(kept, np.concatenate([faces, *cap_faces]), tuple(caps))
+    fans = [cap_faces(loop, len(kept) + number) for number, loop in enumerate(loops)]
+    return CappedTopology(kept, np.concatenate([faces, *fans]), tuple(loops))
 
 
 def part_labels(model, topology: CappedTopology) -> np.ndarray:
