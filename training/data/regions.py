@@ -187,10 +187,12 @@ class RegionSampler:
         inside = np.r_[faces_inside(mask, self.faces), False]  # index -1 reads "no face": False
         on = inside[self._slot_faces[:, 0]] | inside[self._slot_faces[:, 1]]
         # eliminate_zeros works in place: give it copies, not the template graph's own arrays.
-        structure = (on.astype(np.int8), self.graph.indices.copy(), self.graph.indptr.copy())
+        structure = (on.astype(np.float64), self.graph.indices.copy(), self.graph.indptr.copy())
         graph = sp.csr_matrix(structure, shape=self.graph.shape)
         graph.eliminate_zeros()
-        _, labels = connected_components(graph, directed=False)
+        # The graph is symmetric, so its strong components are its components, and the strong
+        # search skips the transpose an undirected search builds (float64 skips a copy too).
+        _, labels = connected_components(graph, directed=True, connection="strong")
         used = np.zeros(len(mask), bool)
         used[self.faces[inside[:-1]].ravel()] = True
         return np.where(used, labels, -1)
