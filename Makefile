@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test test-train lint bench dataset
+.PHONY: run test test-train lint bench dataset train models
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +26,11 @@ test-train: $(BIN)/.train  ## the suite plus the tests that need anny (the 'trai
 
 dataset: $(BIN)/.train  ## the benchmark data set (PRESET=tiny|standard|large)
 	$(BIN)/spectral-unions-train build-dataset --preset $(or $(PRESET),standard) --out data/$(or $(PRESET),standard)
+
+train: $(BIN)/.train  ## train, export, evaluate on a built data set (PRESET=tiny|standard)
+	$(BIN)/spectral-unions-train train --data data/$(or $(PRESET),standard) --runs runs/$(or $(PRESET),standard) --models models --preset $(or $(PRESET),standard)
+
+models: dataset train  ## everything from scratch: data → training → evaluation → export
 
 lint: $(BIN)/.installed
 	$(BIN)/ruff check app training tests benchmarks

@@ -1,4 +1,4 @@
-"""``spectral-unions-train``: build the benchmark data (and, later, train and export models)."""
+"""``spectral-unions-train``: build the benchmark data, train, evaluate and export the models."""
 
 from pathlib import Path
 from typing import Annotated
@@ -31,6 +31,25 @@ def build_dataset_command(
     manifest = build_dataset(AnnySource(), PRESETS[preset], out, seed=seed, scheduler=scheduler, workers=workers)
     typer.echo((out / "DATASET_CARD.md").read_text())
     typer.echo(f"{manifest['rows']} rows in {manifest['build_seconds']} s")
+
+
+@cli.command("train")
+def train_command(
+    data: Annotated[Path, typer.Option(help="A built data set directory.")] = Path("data/standard"),
+    runs: Annotated[Path, typer.Option(help="Checkpoints (resumed if present).")] = Path("runs/standard"),
+    models: Annotated[Path, typer.Option(help="Where the ONNX models, metrics and card go.")] = Path("models"),
+    preset: Annotated[str, typer.Option(help="Training preset: tiny or standard.")] = "standard",
+    seed: Annotated[int, typer.Option()] = 0,
+) -> None:
+    """Train the union operator and the localizers, export to ONNX, evaluate, write the model card."""
+    from training.learning.pipeline import TRAINING_PRESETS, run_pipeline
+
+    if preset not in TRAINING_PRESETS:
+        raise typer.BadParameter(f"unknown preset {preset!r}")
+    command = f"spectral-unions-train train --data {data} --runs {runs} --models {models} --preset {preset}"
+    command += f" --seed {seed}"
+    metrics = run_pipeline(data, runs, models, TRAINING_PRESETS[preset], seed, command)
+    typer.echo(f"trained and evaluated in {metrics['seconds']['total']} s; parity {metrics['parity_max_relative']}")
 
 
 def main() -> None:

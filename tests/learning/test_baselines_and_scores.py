@@ -1,0 +1,52 @@
+"""Baselines, metrics and mask scores against hand-checked cases (numpy only: run in CI)."""
+
+import numpy as np
+import pytest
+
+from training.learning.baselines import UnionLookup, elementwise_min, larger_part
+from training.learning.masks import symmetric_scores
+
+
+@pytest.fixture
+def training_pairs():
+    rng = np.random.default_rng(0)
+    a = np.sort(rng.uniform(1, 300, (50, 20)), axis=1)
+    b = np.sort(rng.uniform(1, 300, (50, 20)), axis=1)
+    return a, b, np.minimum(a, b) * rng.uniform(0.5, 0.9, (50, 1))
+
+
+def test_lookup_returns_the_union_of_a_training_pair_in_either_order(training_pairs):
+    a, b, union = training_pairs
+    lookup = UnionLookup(a, b, union)
+    np.testing.assert_allclose(lookup.predict(a[:5], b[:5]), union[:5], rtol=1e-5)
+    np.testing.assert_allclose(lookup.predict(b[:5], a[:5]), union[:5], rtol=1e-5)
+
+
+def test_lookup_rescales_a_scaled_query(training_pairs):
+    """Both parts 4 times larger in area: eigenvalues ÷ 4, and so is the looked-up union."""
+    a, b, union = training_pairs
+    lookup = UnionLookup(a, b, union)
+    np.testing.assert_allclose(lookup.predict(a[:5] / 4, b[:5] / 4), union[:5] / 4, rtol=1e-5)
+
+
+def test_min_and_larger_part():
+    a = np.array([[1.0, 5.0], [2.0, 3.0]])
+    b = np.array([[2.0, 4.0], [1.0, 9.0]])
+    np.testing.assert_array_equal(elementwise_min(a, b), [[1, 4], [1, 3]])
+    np.testing.assert_array_equal(larger_part(a, b, np.array([1.0, 0.2]), np.array([0.5, 0.7])), [[1, 5], [1, 9]])
+
+
+def test_symmetric_scores_hand_checked():
+    weights = np.array([1.0, 1.0, 2.0, 4.0])
+    mirror = np.array([1, 0, 2, 3])  # vertices 0 and 1 swap sides
+    truth = np.array([[True, False, True, False]] * 3)
+    predicted = np.array(
+        [
+            [False, True, True, False],  # the mirror image: perfect
+            [True, False, False, False],  # 1 of 3 area units, everything else right but vertex 2
+            [False, False, False, True],  # disjoint
+        ]
+    )
+    iou, accuracy = symmetric_scores(predicted, truth, weights, mirror)
+    np.testing.assert_allclose(iou, [1.0, 1 / 3, 0.0])
+    np.testing.assert_allclose(accuracy, [1.0, 6 / 8, 1 / 8])

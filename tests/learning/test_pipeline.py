@@ -1,0 +1,82 @@
+"""Train → export → evaluate on the tiny synthetic data set (needs torch and onnxscript).
+
+A few steps only: what is checked is the plumbing the real models go through — ONNX parity
+with PyTorch, exact commutativity and monotone outputs of the exported operator, the
+localizer's size, the tables, and that a checkpoint resumes instead of starting over.
+"""
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("onnxscript")
+
+from tests.training.synthetic import SyntheticSource  # noqa: E402
+from training.data.build import PRESETS, build_dataset  # noqa: E402
+from training.learning.data import SpectralData  # noqa: E402
+from training.learning.export import session  # noqa: E402
+from training.learning.pipeline import TRAINING_PRESETS, run_pipeline  # noqa: E402
+from training.learning.train_union import train_union  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    root = tmp_path_factory.mktemp("pipeline")
+    build_dataset(SyntheticSource(), PRESETS["tiny"], root / "data", seed=0, workers=1)
+    metrics = run_pipeline(root / "data", root / "runs", root / "models", TRAINING_PRESETS["tiny"], 0, "test")
+    return root, metrics
+
+
+def test_onnx_matches_pytorch(trained):
+    _, metrics = trained
+    assert metrics["parity_max_relative"]["union"] <= 1e-4
+    assert metrics["parity_max_relative"]["localizer"] <= 1e-4
+
+
+def test_exported_union_commutes_and_is_non_decreasing(trained):
+    root, _ = trained
+    union = session(root / "models" / "union.onnx")
+    data = np.load(root / "data" / "dataset.npz")
+    a = data["spectra"][data["spec_a"]].astype(np.float32)
+    b = data["spectra"][data["spec_b"]].astype(np.float32)
+    ab, sigma = union.run(None, {"spectrum_a": a, "spectrum_b": b})
+    ba, _ = union.run(None, {"spectrum_a": b, "spectrum_b": a})
+    assert np.max(np.abs(ab - ba)) <= 1e-6
+    assert (np.diff(ab, axis=1) >= 0).all() and (sigma > 0).all()
+
+
+def test_localizer_fits_the_budget(trained):
+    root, _ = trained
+    path = root / "models" / "localizer.onnx"
+    assert path.stat().st_size <= 10 * 2**20
+    (probability,) = session(path).run(None, {"spectrum": np.linspace(1, 80, 20, dtype=np.float32)[None]})
+    assert probability.shape[0] == 1 and ((probability >= 0) & (probability <= 1)).all()
+
+
+def test_tables_cover_the_test_rows(trained):
+    root, metrics = trained
+    written = json.loads((root / "models" / "metrics.json").read_text())
+    assert written["rows"].keys() == metrics["rows"].keys()
+    assert any(key.startswith("test_a/") for key in written["rows"])
+    row = next(iter(written["rows"].values()))
+    assert {"operator", "elementwise_min", "larger_part", "lookup"} <= set(row["union"])
+    card = (root / "models" / "MODEL_CARD.md").read_text()
+    assert "| test_a/known_man/mesh |" in card
+
+
+def test_a_killed_run_resumes_where_it_stopped(trained, tmp_path):
+    """One epoch, then a resumed second, gives the very weights of two epochs in one go."""
+    root, _ = trained
+    data = SpectralData(root / "data")
+    settings = replace(TRAINING_PRESETS["tiny"].union, epochs=2)
+    straight = train_union(data, tmp_path / "straight.pt", settings)
+    train_union(data, tmp_path / "resumed.pt", replace(settings, epochs=1))
+    resumed = train_union(data, tmp_path / "resumed.pt", settings)
+    for name, value in straight.state_dict().items():
+        torch.testing.assert_close(resumed.state_dict()[name], value, rtol=0, atol=0, msg=name)
+    state = torch.load(tmp_path / "resumed.pt", weights_only=False)
+    assert state["epoch"] == 2
+    assert {"weights", "optimizer", "config", "best_metric", "best_weights"} <= set(state)

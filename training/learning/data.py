@@ -1,0 +1,98 @@
+"""The built data set as arrays the models train and are evaluated on.
+
+``dataset.npz`` stores every spectrum once and refers to it by index; this module resolves
+those indices into (part A, part B, union) spectra per row, carves a validation slice out of
+the training rows (by a fixed seed) and unpacks masks on demand.
+"""
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from training.data.template import Template
+
+VALIDATION_FRACTION = 0.05
+
+
+@dataclass(frozen=True)
+class PairTable:
+    """Rows of pairs: spectra (n, k) of both parts and of the union, with their labels."""
+
+    a: np.ndarray
+    b: np.ndarray
+    union: np.ndarray
+    split: np.ndarray  # train, validation, test_a, test_b
+    group: np.ndarray
+    scenario: np.ndarray
+    variant: np.ndarray
+    shape_a: np.ndarray
+    shape_b: np.ndarray
+    mask_a: np.ndarray
+    mask_b: np.ndarray
+    mask_union: np.ndarray
+
+    def rows(self, selection: np.ndarray) -> "PairTable":
+        return PairTable(**{name: getattr(self, name)[selection] for name in self.__dataclass_fields__})
+
+    def __len__(self) -> int:
+        return len(self.a)
+
+
+@dataclass(frozen=True)
+class TripleTable:
+    """Chains (A ∪ B) ∪ C: spectra (t, k) of A, B, C, A ∪ B, A ∪ B ∪ C; ``test`` flags held-out ones."""
+
+    spectra: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    test: np.ndarray
+    union_mask: np.ndarray
+
+
+class SpectralData:
+    """One built data set directory, loaded once."""
+
+    def __init__(self, root: Path, seed: int = 0) -> None:
+        self.root = root
+        arrays = np.load(root / "dataset.npz")
+        self.spectra = arrays["spectra"].astype(np.float32)
+        self.masks_packed = arrays["masks"]
+        self.template = Template.load(root / "template")
+        self.shapes_per_identity = int(json.loads((root / "manifest.json").read_text())["preset"]["poses"])
+        split = arrays["split"].astype(object)
+        train = np.flatnonzero(split == "train")
+        held = np.random.default_rng([seed, 7]).choice(train, int(len(train) * VALIDATION_FRACTION), replace=False)
+        split[held] = "validation"
+        spectra = self.spectra
+        pairs = PairTable(
+            a=spectra[arrays["spec_a"]],
+            b=spectra[arrays["spec_b"]],
+            union=spectra[arrays["spec_union"]],
+            split=split.astype(str),
+            group=arrays["group"],
+            scenario=arrays["scenario"],
+            variant=arrays["variant"],
+            shape_a=arrays["shape_a"],
+            shape_b=arrays["shape_b"],
+            mask_a=arrays["mask_a"],
+            mask_b=arrays["mask_b"],
+            mask_union=arrays["mask_union"],
+        )
+        solved = np.isfinite(pairs.a).all(1) & np.isfinite(pairs.b).all(1) & np.isfinite(pairs.union).all(1)
+        self.pairs = pairs.rows(np.flatnonzero(solved))
+        triple_spectra = arrays["triple_spectra"]
+        chains = tuple(spectra[triple_spectra[:, i]] for i in range(5))
+        finite = np.all([np.isfinite(s).all(1) for s in chains], axis=0)
+        self.triples = TripleTable(
+            spectra=tuple(s[finite] for s in chains),  # type: ignore[arg-type]
+            test=arrays["triples"][finite, 0].astype(bool),
+            union_mask=arrays["triples"][finite, 6],
+        )
+
+    def identity_of(self, shape: np.ndarray) -> np.ndarray:
+        return shape // self.shapes_per_identity
+
+    def masks(self, indices: np.ndarray) -> np.ndarray:
+        """(len(indices), n) boolean template masks."""
+        n = len(self.template.vertices)
+        return np.unpackbits(self.masks_packed[indices], axis=-1, count=n).astype(bool)

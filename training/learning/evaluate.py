@@ -1,0 +1,177 @@
+"""The paper's tables on our data: union spectra (Table 1) and localization (Tables 2, 3).
+
+Every row is a (split, group, variant) cell of the test sets; each row carries the operator's
+errors next to the baselines' (same rows, same run), the calibration of the operator's stated
+90 % intervals, and the localizers' symmetric IoU and accuracy. Chains of three parts, point-cloud
+parts and the pose noise floor (one region of one identity across poses) complete the picture.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
+from training.learning.baselines import UnionLookup, elementwise_min, larger_part
+from training.learning.data import PairTable, SpectralData
+from training.learning.localizer_net import Localizer
+from training.learning.masks import symmetric_scores
+from training.learning.train_localizer import localize, template_basis
+from training.learning.train_union import INTERVAL_Z, predict
+from training.learning.union_net import UnionOperator
+
+GROUPS = ("known_man", "unknown_man", "unknown_woman", "known_woman", "child")
+SPLITS = ("test_a", "test_b")
+NOISE_FLOOR_REGIONS = 100
+
+# The paper's figures (its Tables 1-3), keyed like our rows: (mse, mae) and (IoU %, accuracy %).
+PAPER_UNION = {
+    "test_a/known_man/mesh": (11.14, 2.09),
+    "test_a/unknown_man/mesh": (13.25, 2.59),
+    "test_a/unknown_woman/mesh": (36.92, 3.93),
+    "test_a/known_man/remeshed": (29.61, 3.31),
+    "test_a/unknown_man/remeshed": (32.67, 3.60),
+    "test_a/unknown_woman/remeshed": (62.33, 5.23),
+    "test_b/known_man/mesh": (15.41, 2.59),
+    "test_b/unknown_man/mesh": (24.05, 3.60),
+    "test_b/unknown_woman/mesh": (64.47, 4.99),
+    "test_b/known_man/remeshed": (51.20, 4.54),
+    "test_b/unknown_man/remeshed": (75.91, 5.90),
+    "test_b/unknown_woman/remeshed": (110.17, 6.78),
+}
+PAPER_IOU = {
+    "one": {
+        "test_a/known_man/mesh": (99.28, 99.61),
+        "test_a/unknown_man/mesh": (93.78, 95.83),
+        "test_a/unknown_woman/mesh": (94.19, 96.32),
+        "test_a/known_man/remeshed": (98.54, 99.06),
+        "test_a/unknown_man/remeshed": (91.44, 94.08),
+        "test_a/unknown_woman/remeshed": (93.47, 95.56),
+        "test_b/known_man/mesh": (97.96, 98.55),
+        "test_b/unknown_man/mesh": (87.58, 92.52),
+        "test_b/unknown_woman/mesh": (96.05, 98.46),
+        "test_b/known_man/remeshed": (93.04, 97.33),
+        "test_b/unknown_man/remeshed": (83.69, 91.08),
+        "test_b/unknown_woman/remeshed": (95.59, 98.43),
+    },
+    "six": {
+        "test_a/known_man/mesh": (98.24, 99.09),
+        "test_a/unknown_man/mesh": (96.26, 97.64),
+        "test_a/unknown_woman/mesh": (96.17, 98.04),
+        "test_a/known_man/remeshed": (97.70, 98.74),
+        "test_a/unknown_man/remeshed": (95.88, 97.78),
+        "test_a/unknown_woman/remeshed": (96.04, 97.66),
+        "test_b/known_man/mesh": (97.43, 99.14),
+        "test_b/unknown_man/mesh": (93.31, 98.23),
+        "test_b/unknown_woman/mesh": (95.74, 98.59),
+        "test_b/known_man/remeshed": (97.61, 99.11),
+        "test_b/unknown_man/remeshed": (90.85, 97.63),
+        "test_b/unknown_woman/remeshed": (96.81, 98.98),
+    },
+}
+
+
+def spectral_errors(predicted: np.ndarray, truth: np.ndarray) -> dict:
+    """mse and mae over all eigenvalues (1/m²), and mean relative error, overall and per index.
+
+    A closed union has λ₁ = 0, where a relative error means nothing: such entries are left out.
+    """
+    difference = predicted - truth
+    meaningful = truth > 1e-6
+    relative = np.where(meaningful, np.abs(difference) / np.where(meaningful, truth, 1), np.nan)
+    return {
+        "mse": float(np.mean(difference**2)),
+        "mae": float(np.mean(np.abs(difference))),
+        "mre": float(np.nanmean(relative)),
+        "mre_per_eigenvalue": [round(float(x), 5) for x in np.nanmean(relative, axis=0)],
+    }
+
+
+@dataclass
+class Evaluator:
+    """Everything the rows share: data, models, the lookup of the training pairs, areas."""
+
+    data: SpectralData
+    union: UnionOperator
+    localizers: dict[str, Localizer]
+
+    def __post_init__(self) -> None:
+        pairs = self.data.pairs
+        train = pairs.rows(np.flatnonzero(pairs.split == "train"))
+        self.lookup = UnionLookup(train.a, train.b, train.union)
+        _, self.areas = template_basis(self.data, 1)
+
+    def area(self, mask_ids: np.ndarray) -> np.ndarray:
+        return self.data.masks(mask_ids) @ self.areas
+
+    def union_methods(self, rows: PairTable) -> dict[str, np.ndarray]:
+        return {
+            "operator": predict(self.union, rows.a, rows.b)[0],
+            "elementwise_min": elementwise_min(rows.a, rows.b),
+            "larger_part": larger_part(rows.a, rows.b, self.area(rows.mask_a), self.area(rows.mask_b)),
+            "lookup": self.lookup.predict(rows.a, rows.b),
+        }
+
+    def row(self, rows: PairTable) -> dict:
+        methods = self.union_methods(rows)
+        mean, sigma = predict(self.union, rows.a, rows.b)
+        out: dict = {"rows": len(rows), "union": {name: spectral_errors(p, rows.union) for name, p in methods.items()}}
+        out["interval_coverage"] = float(np.mean(np.abs(mean - rows.union) <= INTERVAL_Z * sigma))
+        truth = self.data.masks(rows.mask_union)
+        out["localization"] = {}
+        for name, model in self.localizers.items():
+            iou, accuracy = symmetric_scores(localize(model, mean), truth, self.areas, self.data.template.mirror)
+            out["localization"][name] = {"iou": float(iou.mean()), "accuracy": float(accuracy.mean())}
+        return out
+
+    def chains(self) -> dict:
+        """(A ∪ B) ∪ C through the operator twice, against the true spectrum of A ∪ B ∪ C."""
+        triples = self.data.triples
+        a, b, c, _, abc = (s[triples.test] for s in triples.spectra)
+        if not len(a):
+            return {"rows": 0}
+        inner = predict(self.union, a, b)[0]
+        chained = {
+            "operator": predict(self.union, inner, c)[0],
+            "elementwise_min": np.minimum(np.minimum(a, b), c),
+            "lookup": self.lookup.predict(self.lookup.predict(a, b), c),
+        }
+        return {"rows": int(len(a)), "union": {name: spectral_errors(p, abc) for name, p in chained.items()}}
+
+    def noise_floor(self) -> dict:
+        """One test union region of one identity, in its own pose and another: the spread poses cause."""
+        pairs = self.data.pairs
+        rows = np.flatnonzero((pairs.split == "test_a") & (pairs.variant == MESH) & (pairs.scenario == "partial"))
+        rows = rows[:NOISE_FLOOR_REGIONS]
+        shapes = np.load(self.data.root / "work" / "shapes.npy", mmap_mode="r")
+        poses = self.data.shapes_per_identity
+        rng = np.random.default_rng(0)
+        moved, truth = [], []
+        for row in rows:
+            shape = int(pairs.shape_a[row])
+            other = shape - shape % poses + (shape % poses + int(rng.integers(1, poses))) % poses
+            mask = self.data.masks(pairs.mask_union[row : row + 1])[0]
+            vertices = np.asarray(shapes[other], dtype=np.float64)
+            moved.append(task_spectrum(vertices, self.data.template.faces, mask, MESH, pairs.union.shape[1]))
+            truth.append(pairs.union[row])
+        moved_array, truth_array = np.array(moved), np.array(truth)
+        finite = np.isfinite(moved_array).all(1)
+        return {"rows": int(finite.sum()), **spectral_errors(moved_array[finite], truth_array[finite])}
+
+
+def evaluate(data: SpectralData, union: UnionOperator, localizers: dict[str, Localizer]) -> dict:
+    """metrics.json's content: every test row, chains, point clouds and the noise floor."""
+    evaluator = Evaluator(data, union, localizers)
+    pairs = data.pairs
+    rows = {}
+    for split in SPLITS:
+        for group in GROUPS:
+            for variant in (MESH, REMESHED, CLOUD):
+                selection = (pairs.split == split) & (pairs.group == group) & (pairs.variant == variant)
+                if selection.any():
+                    rows[f"{split}/{group}/{variant}"] = evaluator.row(pairs.rows(np.flatnonzero(selection)))
+    return {
+        "rows": rows,
+        "chains": evaluator.chains(),
+        "noise_floor": evaluator.noise_floor(),
+        "paper": {"union": PAPER_UNION, "localization": PAPER_IOU},
+    }

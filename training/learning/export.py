@@ -1,0 +1,72 @@
+"""ONNX export of the trained models, with the parity checks the service relies on.
+
+Both graphs have a dynamic batch dimension and a fixed opset; the service (onnxruntime, no
+torch) reads their input and output names from here, documented in the model card.
+"""
+
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+import torch
+
+from training.learning.localizer_net import Localizer
+from training.learning.union_net import UnionOperator
+
+OPSET = 18
+UNION_INPUTS = ("spectrum_a", "spectrum_b")
+UNION_OUTPUTS = ("union", "sigma")
+LOCALIZER_INPUTS = ("spectrum",)
+LOCALIZER_OUTPUTS = ("probability",)
+
+
+def _export(model: torch.nn.Module, example: tuple[torch.Tensor, ...], path: Path, inputs, outputs) -> None:
+    model = model.cpu().eval()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    batch = torch.export.Dim("batch", min=1, max=65536)
+    torch.onnx.export(
+        model,
+        example,
+        str(path),
+        input_names=list(inputs),
+        output_names=list(outputs),
+        opset_version=OPSET,
+        dynamic_shapes=tuple({0: batch} for _ in example),
+        external_data=False,
+        dynamo=True,
+        verbose=False,
+    )
+
+
+def export_union(model: UnionOperator, path: Path) -> None:
+    k = model.config.k
+    example = torch.linspace(1, 60, k).repeat(2, 1)
+    _export(model, (example, example * 1.5), path, UNION_INPUTS, UNION_OUTPUTS)
+
+
+def export_localizer(model: Localizer, path: Path) -> None:
+    example = torch.linspace(1, 60, model.config.k).repeat(2, 1)
+    _export(model, (example,), path, LOCALIZER_INPUTS, LOCALIZER_OUTPUTS)
+
+
+def session(path: Path) -> ort.InferenceSession:
+    return ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+
+
+def union_parity(model: UnionOperator, path: Path, a: np.ndarray, b: np.ndarray) -> float:
+    """Largest relative difference between onnxruntime and PyTorch on these operands."""
+    with torch.no_grad():
+        expected = model.eval()(torch.as_tensor(a), torch.as_tensor(b))
+    got = session(path).run(None, {"spectrum_a": a.astype(np.float32), "spectrum_b": b.astype(np.float32)})
+    return max(_relative(g, e.numpy()) for g, e in zip(got, expected, strict=True))
+
+
+def localizer_parity(model: Localizer, path: Path, spectra: np.ndarray) -> float:
+    with torch.no_grad():
+        expected = model.eval()(torch.as_tensor(spectra)).numpy()
+    (got,) = session(path).run(None, {"spectrum": spectra.astype(np.float32)})
+    return _relative(got, expected)
+
+
+def _relative(got: np.ndarray, expected: np.ndarray) -> float:
+    return float(np.max(np.abs(got - expected) / (np.abs(expected) + 1e-6)))

@@ -1,0 +1,96 @@
+"""What every training run shares: device choice, seeding, schedule, resumable checkpoints.
+
+A checkpoint is a plain dict (weights, optimizer, scheduler, config, epoch, best metric, best
+weights) so that it loads without this package's classes and a killed run resumes exactly.
+"""
+
+import random
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+
+def pick_device() -> torch.device:
+    """The GPU when one is present, else the CPU: the same code trains on both."""
+    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+
+
+def seed_everything(seed: int) -> torch.Generator:
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+    return torch.Generator().manual_seed(seed)
+
+
+def optimizer_and_schedule(
+    model: torch.nn.Module, learning_rate: float, weight_decay: float, first_restart: int
+) -> tuple[torch.optim.Optimizer, torch.optim.lr_scheduler.LRScheduler]:
+    """Adam with cosine annealing and warm restarts (period doubling), stepped per epoch."""
+    optimizer = torch.optim.Adam(model.parameters(), lr=learning_rate, weight_decay=weight_decay)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(optimizer, T_0=first_restart, T_mult=2)
+    return optimizer, schedule
+
+
+@dataclass
+class Progress:
+    """Where a run stands; saved in every checkpoint."""
+
+    epoch: int = 0
+    best_metric: float = float("inf")  # lower is better
+    best_epoch: int = -1
+    stale_epochs: int = 0
+
+
+def save_checkpoint(
+    path: Path,
+    model: torch.nn.Module,
+    optimizer: torch.optim.Optimizer,
+    schedule: torch.optim.lr_scheduler.LRScheduler,
+    config: dict,
+    progress: Progress,
+    best_weights: dict,
+    generator: torch.Generator,
+) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    state = {
+        "weights": model.state_dict(),
+        "optimizer": optimizer.state_dict(),
+        "schedule": schedule.state_dict(),
+        "config": config,
+        "epoch": progress.epoch,
+        "best_metric": progress.best_metric,
+        "best_epoch": progress.best_epoch,
+        "stale_epochs": progress.stale_epochs,
+        "best_weights": best_weights,
+        "torch_rng": torch.get_rng_state(),
+        "generator": generator.get_state(),
+    }
+    temporary = path.with_suffix(".tmp")
+    torch.save(state, temporary)
+    temporary.replace(path)  # a kill mid-write never leaves a truncated checkpoint
+
+
+def load_checkpoint(
+    path: Path,
+    model: torch.nn.Module,
+    optimizer: torch.optim.Optimizer,
+    schedule: torch.optim.lr_scheduler.LRScheduler,
+    generator: torch.Generator,
+) -> tuple[Progress, dict]:
+    """Restore a run in place (batch order and noise included); returns its progress and best weights."""
+    state = torch.load(path, map_location="cpu", weights_only=False)
+    model.load_state_dict(state["weights"])
+    optimizer.load_state_dict(state["optimizer"])
+    schedule.load_state_dict(state["schedule"])
+    torch.set_rng_state(state["torch_rng"])
+    generator.set_state(state["generator"])
+    progress = Progress(state["epoch"], state["best_metric"], state["best_epoch"], state["stale_epochs"])
+    return progress, state["best_weights"]
+
+
+def best_weights(path: Path) -> tuple[dict, dict]:
+    """(config, best weights) of a finished run."""
+    state = torch.load(path, map_location="cpu", weights_only=False)
+    return state["config"], state["best_weights"]

@@ -1,0 +1,150 @@
+"""Train the region localizer on predicted unions (operator frozen) and noisy true spectra.
+
+Samples: for each training row, the operator's predicted union with the union mask, and the
+true spectra of part A, part B and the union (a full-coverage union is the whole body) with a
+small multiplicative noise redrawn every epoch. The loss is the area-weighted cross-entropy
+against the true mask or its mirror, whichever is smaller (spectra cannot tell them apart).
+``identities`` restricts training to some identities, for the paper's single- and
+six-identity tables. Early stopping on the validation rows' symmetric IoU.
+"""
+
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from app.geometry.laplacian import mesh_operators
+from app.geometry.spectrum import eigenpairs
+from training.learning.data import PairTable, SpectralData
+from training.learning.fit import (
+    Progress,
+    load_checkpoint,
+    optimizer_and_schedule,
+    pick_device,
+    save_checkpoint,
+    seed_everything,
+)
+from training.learning.localizer_net import Localizer, LocalizerConfig, feature_statistics
+from training.learning.masks import symmetric_scores
+from training.learning.train_union import predict
+from training.learning.union_net import UnionOperator
+
+
+@dataclass(frozen=True)
+class LocalizerTraining:
+    epochs: int = 40
+    batch: int = 128
+    learning_rate: float = 1e-3
+    weight_decay: float = 1e-6
+    first_restart: int = 10
+    patience: int = 10
+    noise: float = 0.01
+    seed: int = 0
+
+
+def template_basis(data: SpectralData, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n, count) M-orthonormal eigenfunctions of the template, and its vertex areas."""
+    operators = mesh_operators(data.template.vertices, data.template.faces)
+    _, functions = eigenpairs(operators, count)
+    return functions, operators.mass.diagonal()
+
+
+def _samples(data: SpectralData, rows: PairTable, predicted: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(spectra, mask ids, noisy flag): predicted unions, then true parts and unions."""
+    spectra = np.concatenate([predicted, rows.a, rows.b, rows.union])
+    masks = np.concatenate([rows.mask_union, rows.mask_a, rows.mask_b, rows.mask_union])
+    noisy = np.r_[np.zeros(len(predicted), bool), np.ones(3 * len(rows), bool)]
+    return spectra.astype(np.float32), masks, noisy
+
+
+def symmetric_loss(
+    logits: torch.Tensor, truth: torch.Tensor, weights: torch.Tensor, mirror: torch.Tensor
+) -> torch.Tensor:
+    """Mean over the batch of min(BCE vs mask, BCE vs mirrored mask), area-weighted per vertex."""
+    bce = torch.nn.functional.binary_cross_entropy_with_logits
+    direct = (bce(logits, truth, reduction="none") * weights).sum(1)
+    mirrored = (bce(logits, truth[:, mirror], reduction="none") * weights).sum(1)
+    return torch.minimum(direct, mirrored).mean()
+
+
+@torch.no_grad()
+def localize(model: Localizer, spectra: np.ndarray, batch: int = 512) -> np.ndarray:
+    """(m, n) boolean masks at probability ≥ 0.5."""
+    model.eval()
+    device = next(model.parameters()).device
+    out = []
+    for start in range(0, len(spectra), batch):
+        chunk = torch.as_tensor(spectra[start : start + batch], dtype=torch.float32, device=device)
+        out.append((model.logits(chunk) >= 0).cpu().numpy())
+    return np.concatenate(out)
+
+
+def train_localizer(
+    data: SpectralData,
+    union: UnionOperator,
+    checkpoint: Path,
+    identities: np.ndarray | None = None,
+    settings: LocalizerTraining | None = None,
+    config: LocalizerConfig | None = None,
+) -> Localizer:
+    """Train (or resume) a localizer and return its best weights, on the CPU."""
+    settings, config = settings or LocalizerTraining(), config or LocalizerConfig()
+    generator = seed_everything(settings.seed)
+    device = pick_device()
+    config = replace(config, k=data.spectra.shape[1])
+    pairs = data.pairs
+    train_rows = pairs.split == "train"
+    if identities is not None:
+        train_rows &= np.isin(data.identity_of(pairs.shape_a), identities)
+    train = pairs.rows(np.flatnonzero(train_rows))
+    validation = pairs.rows(np.flatnonzero(pairs.split == "validation"))
+    spectra, mask_ids, noisy = _samples(data, train, predict(union, train.a, train.b)[0])
+    functions, areas = template_basis(data, config.basis or 1)
+    mean, std = feature_statistics(spectra)
+    model = Localizer(config, functions, mean, std).to(device)
+    optimizer, schedule = optimizer_and_schedule(
+        model, settings.learning_rate, settings.weight_decay, settings.first_restart
+    )
+    run_config = {
+        "model": config.as_dict(),
+        "training": asdict(settings),
+        "identities": None if identities is None else [int(i) for i in identities],
+    }
+    progress, best = Progress(), {k: v.clone() for k, v in model.state_dict().items()}
+    if checkpoint.exists():
+        progress, best = load_checkpoint(checkpoint, model, optimizer, schedule, generator)
+    weights = torch.as_tensor(areas / areas.sum(), dtype=torch.float32, device=device)
+    mirror = torch.as_tensor(data.template.mirror, device=device)
+    validation_spectra = predict(union, validation.a, validation.b)[0]
+    validation_masks = data.masks(validation.mask_union)
+    steps = max(1, len(spectra) // settings.batch)
+    bar = tqdm(range(progress.epoch, settings.epochs), desc="localizer", unit="epoch", initial=progress.epoch)
+    for epoch in bar:
+        model.train()
+        order = torch.randperm(len(spectra), generator=generator).numpy()
+        for step in range(steps):
+            rows = order[step * settings.batch : (step + 1) * settings.batch]
+            x = torch.as_tensor(spectra[rows])
+            jitter = 1 + settings.noise * torch.randn(x.shape, generator=generator)
+            x = torch.where(torch.as_tensor(noisy[rows])[:, None], x * jitter, x).to(device)
+            truth = torch.as_tensor(data.masks(mask_ids[rows]), dtype=torch.float32, device=device)
+            loss = symmetric_loss(model.logits(x), truth, weights, mirror)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            schedule.step(epoch + (step + 1) / steps)
+        iou, _ = symmetric_scores(localize(model, validation_spectra), validation_masks, areas, data.template.mirror)
+        progress.epoch = epoch + 1
+        if -iou.mean() < progress.best_metric:
+            progress.best_metric, progress.best_epoch, progress.stale_epochs = -float(iou.mean()), epoch, 0
+            best = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        else:
+            progress.stale_epochs += 1
+        bar.set_postfix(val_iou=f"{iou.mean():.4f}", best=f"{-progress.best_metric:.4f}")
+        save_checkpoint(checkpoint, model, optimizer, schedule, run_config, progress, best, generator)
+        if progress.stale_epochs >= settings.patience:
+            break
+    model.load_state_dict(best)
+    return model.cpu().eval()
