@@ -8,9 +8,10 @@ from fastapi import FastAPI
 
 from app import __version__
 from app.api.problems import install_problem_handlers
-from app.api.routes import health, spectrum
+from app.api.routes import health, spectrum, unions
 from app.api.upload_limit import UploadLimitMiddleware
 from app.core.config import Settings, get_settings
+from app.inference.models import SpectralModels
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -20,6 +21,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         app.state.solver_limiter = anyio.CapacityLimiter(settings.solver_concurrency)
+        app.state.models = SpectralModels(settings.models_dir)  # a broken artefact fails start-up
         app.state.ready = True
         yield
         app.state.ready = False
@@ -35,4 +37,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     install_problem_handlers(app)
     app.include_router(health.router)
     app.include_router(spectrum.router, prefix="/v1")
+    app.include_router(unions.router, prefix="/v1")
     return app

@@ -2,6 +2,7 @@
 
 import os
 from functools import lru_cache
+from pathlib import Path
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -18,6 +19,10 @@ class Settings(BaseSettings):
     max_vertices: int = Field(100_000, gt=0, description="Vertex cap for an uploaded shape.")
     max_hole_edges: int = Field(
         8, ge=0, description="Boundary loops up to this many edges are pin-holes and get filled."
+    )
+    models_dir: Path = Field(
+        Path(__file__).resolve().parents[2] / "models",
+        description="Directory with union.onnx, localizer.onnx and the template (the repository's models/).",
     )
     solver_concurrency: int = Field(
         default_factory=lambda: max(1, os.cpu_count() or 1),

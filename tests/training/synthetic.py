@@ -26,6 +26,8 @@ def synthetic_template() -> Template:
 class SyntheticSource:
     """Identities scale the template; poses bend it smoothly (near-isometric, like skinning)."""
 
+    description = "synthetic test body"
+
     def template(self) -> Template:
         return synthetic_template()
 

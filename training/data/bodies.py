@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from training.data.template import TOPOLOGY, CappedTopology, capped_topology
+from training.data.template import SOURCE, TOPOLOGY, CappedTopology, capped_topology
 
 # (bone, axis, low°, high°) for the left side; the right side mirrors it (x kept, y and z negated).
 POSE_RANGES: tuple[tuple[str, str, float, float], ...] = (
@@ -131,6 +131,8 @@ def _rotation(axes: dict[str, float]) -> np.ndarray:
 
 class AnnySource:
     """The real :class:`~training.data.build.ShapeSource`: anny identities in random valid poses."""
+
+    description = SOURCE
 
     def __init__(self) -> None:
         self.body = BodyModel()

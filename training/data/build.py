@@ -97,6 +97,8 @@ class ShapeGroup:
 class ShapeSource(Protocol):
     """Where posed bodies come from: anny in a real build, a synthetic body in tests."""
 
+    description: str  # recorded with the template
+
     def template(self) -> Template: ...
 
     def shapes(self, groups: Sequence[ShapeGroup], poses: int, seed: int) -> tuple[np.ndarray, list[dict]]:
@@ -219,7 +221,7 @@ def build_dataset(
     layout.work.mkdir(parents=True, exist_ok=True)
     template_dir = out / "template"
     if not (template_dir / "template.npz").exists():
-        source.template().save(template_dir)
+        source.template().save(template_dir, source.description)
     sampler = _sampler(str(template_dir))
     shapes_path, identities = _stage_shapes(source, preset, layout, seed)
     pairs, triples = _stage_masks(preset, layout, str(template_dir), seed, scheduler, workers)

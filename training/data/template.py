@@ -7,15 +7,16 @@ order are the same for every identity and pose, which is what makes vertex masks
 template meaningful across shapes.
 """
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from app.geometry.topology import boundary_loops, cap_faces
+from app.inference.template import PART_NAMES, SIDED_PARTS, Template
 
 TOPOLOGY = "anny-noeyes-notongue"
+SOURCE = f"anny topology {TOPOLOGY}, neutral phenotype, rest pose; mouth and eye pockets capped"
 
 # 16 body parts from the argmax of the skinning weights grouped by bone (the base mesh's vertex
 # groups hold no body-part segmentation). Bones are matched by name prefix; ".L"/".R" split sides.
@@ -31,10 +32,7 @@ PART_BONES: dict[str, tuple[str, ...]] = {
     "shin": ("lowerleg",),
     "foot": ("foot", "toe"),
 }
-SIDED = ("upper_arm", "forearm", "hand", "thigh", "shin", "foot")
-PART_NAMES: tuple[str, ...] = ("head", "neck", "torso", "hips") + tuple(
-    f"{side}_{part}" for part in SIDED for side in ("left", "right")
-)
+__all__ = ["PART_NAMES", "SOURCE", "Template", "build_template"]
 
 
 @dataclass(frozen=True)
@@ -55,45 +53,6 @@ class CappedTopology:
         kept = anny_vertices[..., self.kept, :]
         centres = [kept[..., loop, :].mean(axis=-2, keepdims=True) for loop in self.caps]
         return np.concatenate([kept, *centres], axis=-2)
-
-
-@dataclass(frozen=True)
-class Template:
-    """The neutral rest-pose body with its 16 part labels and left/right mirror map."""
-
-    vertices: np.ndarray
-    faces: np.ndarray
-    labels: np.ndarray  # (n,) index into PART_NAMES
-    mirror: np.ndarray  # (n,) vertex → its mirror image, an involution
-
-    def save(self, directory: Path) -> None:
-        """Write ``template.npz`` (geometry and maps) and ``template.json`` (names, counts)."""
-        directory.mkdir(parents=True, exist_ok=True)
-        np.savez_compressed(
-            directory / "template.npz",
-            vertices=self.vertices.astype(np.float32),
-            faces=self.faces.astype(np.int32),
-            labels=self.labels.astype(np.int8),
-            mirror=self.mirror.astype(np.int32),
-        )
-        meta = {
-            "source": f"anny topology {TOPOLOGY}, neutral phenotype, rest pose; mouth and eye pockets capped",
-            "units": "m",
-            "vertices": len(self.vertices),
-            "faces": len(self.faces),
-            "parts": list(PART_NAMES),
-        }
-        (directory / "template.json").write_text(json.dumps(meta, indent=2) + "\n")
-
-    @classmethod
-    def load(cls, directory: Path) -> "Template":
-        data = np.load(directory / "template.npz")
-        return cls(
-            data["vertices"].astype(np.float64),
-            data["faces"].astype(np.int64),
-            data["labels"].astype(np.int64),
-            data["mirror"].astype(np.int64),
-        )
 
 
 def capped_topology(model) -> CappedTopology:
@@ -153,7 +112,7 @@ def _part_of_bone(name: str) -> int:
     stem, _, side = name.partition(".")
     for part, prefixes in PART_BONES.items():
         if stem.startswith(prefixes):
-            if part in SIDED:
+            if part in SIDED_PARTS:
                 return PART_NAMES.index(f"{'left' if side == 'L' else 'right'}_{part}")
             return PART_NAMES.index(part)
     raise ValueError(f"bone {name!r} belongs to no body part")

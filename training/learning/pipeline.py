@@ -2,7 +2,8 @@
 
 Runs (checkpoints) live under ``runs``; a killed pipeline resumes each model where it stopped.
 The service's models are the union operator and the localizer trained on all training
-identities; the one- and six-identity localizers exist for the paper's Tables 2 and 3.
+identities; the one- and six-identity localizers exist for the paper's Tables 2 and 3, and a
+localizer with a full per-vertex output layer measures what the compact basis head gives up.
 """
 
 import json
@@ -16,7 +17,7 @@ from training.learning.card import update_card
 from training.learning.data import SpectralData
 from training.learning.evaluate import evaluate
 from training.learning.export import export_localizer, export_union, localizer_parity, union_parity
-from training.learning.localizer_net import Localizer
+from training.learning.localizer_net import Localizer, LocalizerConfig
 from training.learning.train_localizer import LocalizerTraining, train_localizer
 from training.learning.train_union import UnionTraining, train_union
 
@@ -57,10 +58,13 @@ def run_pipeline(data_dir: Path, runs: Path, models: Path, preset: TrainingPrese
     data = SpectralData(data_dir, seed=seed)
     union = train_union(data, runs / "union.pt", settings=replace(preset.union, seed=seed))
     localizers: dict[str, Localizer] = {}
+    settings = replace(preset.localizer, seed=seed)
     for name, identities in localizer_identities(data).items():
-        localizers[name] = train_localizer(
-            data, union, runs / f"localizer-{name}.pt", identities, settings=replace(preset.localizer, seed=seed)
-        )
+        localizers[name] = train_localizer(data, union, runs / f"localizer-{name}.pt", identities, settings)
+    # The comparison the basis head must stand: a full per-vertex output layer, same data.
+    localizers["per_vertex"] = train_localizer(
+        data, union, runs / "localizer-per-vertex.pt", None, settings, LocalizerConfig(basis=None)
+    )
     trained = time.perf_counter()
     models.mkdir(parents=True, exist_ok=True)
     export_union(union, models / UNION_FILE)

@@ -1,0 +1,1 @@
+"""What the service does with spectra: the ONNX union operator and localizer, and the template."""

@@ -1,0 +1,95 @@
+"""The ONNX models the service runs: the union operator and the region localizer.
+
+Loaded once at start-up (onnxruntime, CPU, no torch). Input and output names, k and the
+template size are read from the graphs and checked against each other and the template, so a
+mismatched set of artefacts fails at start-up, not on the first request.
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+
+from app.geometry.topology import face_areas
+from app.inference.template import PART_NAMES, Template
+
+UNION_FILE, LOCALIZER_FILE = "union.onnx", "localizer.onnx"
+INTERVAL_Z = 1.6449  # the union's sigma is calibrated so that ± z·sigma covers 90 %
+MASK_THRESHOLD = 0.5
+
+
+@dataclass(frozen=True)
+class Union:
+    """A predicted union spectrum and its calibrated per-eigenvalue uncertainty (1/m²)."""
+
+    eigenvalues: np.ndarray
+    sigma: np.ndarray
+
+    @property
+    def lower(self) -> np.ndarray:
+        return np.clip(self.eigenvalues - INTERVAL_Z * self.sigma, 0, None)
+
+    @property
+    def upper(self) -> np.ndarray:
+        return self.eigenvalues + INTERVAL_Z * self.sigma
+
+
+@dataclass(frozen=True)
+class Region:
+    """A localized region: template vertices inside it and the covered share of each part's area."""
+
+    vertices: np.ndarray
+    area_fraction: float
+    part_coverage: dict[str, float]
+
+
+def _session(path: Path, threads: int) -> ort.InferenceSession:
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = threads
+    options.inter_op_num_threads = 1
+    return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+
+
+class SpectralModels:
+    """Union operator, localizer and template from one models directory."""
+
+    def __init__(self, directory: Path, threads: int = 1) -> None:
+        self.template = Template.load(directory)
+        self.union_session = _session(directory / UNION_FILE, threads)
+        self.localizer_session = _session(directory / LOCALIZER_FILE, threads)
+        self.k = int(self.union_session.get_inputs()[0].shape[1])
+        vertex_count = self.localizer_session.get_outputs()[0].shape[1]
+        if vertex_count != len(self.template.vertices):
+            raise ValueError(f"localizer predicts {vertex_count} vertices, template has {len(self.template.vertices)}")
+        if self.localizer_session.get_inputs()[0].shape[1] != self.k:
+            raise ValueError("union operator and localizer disagree on k")
+        self.vertex_area = _vertex_areas(self.template)
+
+    def union(self, spectra: list[np.ndarray]) -> Union:
+        """Union of two or more spectra, folded left to right: ((A ∪ B) ∪ C) ∪ …, as trained."""
+        current, sigma = spectra[0], np.zeros(self.k, np.float32)
+        for other in spectra[1:]:
+            feeds = {"spectrum_a": current[None].astype(np.float32), "spectrum_b": other[None].astype(np.float32)}
+            union, sigma = self.union_session.run(None, feeds)
+            current, sigma = union[0], sigma[0]
+        return Union(current.astype(np.float64), sigma.astype(np.float64))
+
+    def localize(self, spectrum: np.ndarray) -> Region:
+        """The template region whose spectrum this is (up to left/right: spectra cannot tell)."""
+        (probability,) = self.localizer_session.run(None, {"spectrum": spectrum[None].astype(np.float32)})
+        inside = probability[0] >= MASK_THRESHOLD
+        area = self.vertex_area
+        labels = self.template.labels
+        coverage = {
+            name: float(area[inside & (labels == index)].sum() / area[labels == index].sum())
+            for index, name in enumerate(PART_NAMES)
+        }
+        return Region(np.flatnonzero(inside), float(area[inside].sum() / area.sum()), coverage)
+
+
+def _vertex_areas(template: Template) -> np.ndarray:
+    """Lumped (barycentric) vertex areas: a third of each incident triangle's area."""
+    area = np.zeros(len(template.vertices))
+    np.add.at(area, template.faces.ravel(), np.repeat(face_areas(template.vertices, template.faces) / 3, 3))
+    return area

@@ -1,0 +1,35 @@
+"""Checks on spectra that clients send: the operator is only defined on real spectra.
+
+A spectrum here is the first k eigenvalues of a shape in 1/m², ascending and non-negative. A
+vector that is none of these (NaN, negative, decreasing, wrong length) is the client's error,
+reported as such instead of producing a confident-looking union of garbage.
+"""
+
+import numpy as np
+
+from app.geometry.errors import GeometryError
+
+# Eigen-solvers return λ₁ of a closed surface as ±1e-12, and ties as tiny inversions.
+ORDER_TOLERANCE = 1e-6
+
+
+class InvalidSpectrum(GeometryError):
+    """A spectrum in a request is not a valid truncated spectrum."""
+
+    slug = "invalid-spectrum"
+    title = "Invalid spectrum"
+
+
+def checked_spectrum(values: list[float] | np.ndarray, k: int, name: str = "spectrum") -> np.ndarray:
+    """The values as a float32 (k,) array, or :class:`InvalidSpectrum` saying what is wrong."""
+    spectrum = np.asarray(values, dtype=np.float64)
+    if spectrum.shape != (k,):
+        raise InvalidSpectrum(f"{name} must hold exactly {k} eigenvalues, got {spectrum.size}")
+    if not np.isfinite(spectrum).all():
+        raise InvalidSpectrum(f"{name} holds NaN or infinite values")
+    scale = max(float(np.abs(spectrum).max()), 1.0)
+    if spectrum.min() < -ORDER_TOLERANCE * scale:
+        raise InvalidSpectrum(f"{name} has negative eigenvalues: Laplace–Beltrami spectra are ≥ 0")
+    if np.any(np.diff(spectrum) < -ORDER_TOLERANCE * scale):
+        raise InvalidSpectrum(f"{name} is not in ascending order")
+    return np.clip(spectrum, 0, None).astype(np.float32)

