@@ -5,6 +5,7 @@ template size are read from the graphs and checked against each other and the te
 mismatched set of artefacts fails at start-up, not on the first request.
 """
 
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -65,9 +66,11 @@ class SpectralModels:
         if self.localizer_session.get_inputs()[0].shape[1] != self.k:
             raise ValueError("union operator and localizer disagree on k")
         self.vertex_area = _vertex_areas(self.template)
+        digest = hashlib.sha256((directory / UNION_FILE).read_bytes() + (directory / LOCALIZER_FILE).read_bytes())
+        self.version = digest.hexdigest()[:12]  # content hash: two replicas agree iff they serve the same models
 
     def union(self, spectra: list[np.ndarray]) -> Union:
-        """Union of two or more spectra, folded left to right: ((A ∪ B) ∪ C) ∪ …, as trained."""
+        """Union of the spectra, folded left to right: ((A ∪ B) ∪ C) ∪ …, as trained; one is returned as is."""
         current, sigma = spectra[0], np.zeros(self.k, np.float32)
         for other in spectra[1:]:
             feeds = {"spectrum_a": current[None].astype(np.float32), "spectrum_b": other[None].astype(np.float32)}

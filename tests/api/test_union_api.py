@@ -1,9 +1,11 @@
 """``/v1/union``, ``/v1/localize`` and ``/v1/models`` on the committed ONNX models."""
 
-import math
+import io
+import json
 
 import numpy as np
 import pytest
+import trimesh
 
 from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
@@ -12,6 +14,8 @@ from app.geometry.topology import drop_unreferenced
 from app.inference.template import PART_NAMES, Template
 
 PROBLEM = "application/problem+json"
+LEGS = ("left_thigh", "right_thigh", "left_shin", "right_shin", "left_foot", "right_foot")
+HEAD_AND_ARMS = ("head", "neck", "left_upper_arm", "right_upper_arm", "left_hand", "right_hand")
 
 
 @pytest.fixture(scope="module")
@@ -19,72 +23,108 @@ def template() -> Template:
     return Template.load(Settings().models_dir)
 
 
-def region_spectrum(template: Template, removed: tuple[str, ...]) -> list[float]:
-    """Dirichlet spectrum of the template with some body parts cut away (an independent solve)."""
+def region(template: Template, removed: tuple[str, ...]) -> Mesh:
+    """The template with some body parts cut away."""
     keep = ~np.isin(template.labels, [PART_NAMES.index(p) for p in removed])
-    faces = template.faces[keep[template.faces].all(axis=1)]
-    mesh = Mesh(*drop_unreferenced(template.vertices, faces))
+    return Mesh(*drop_unreferenced(template.vertices, template.faces[keep[template.faces].all(axis=1)]))
+
+
+def spectrum(mesh: Mesh) -> list[float]:
     return list(mesh_spectrum(mesh, SpectrumOptions(k=20)).eigenvalues)
+
+
+def ply_bytes(mesh: Mesh) -> bytes:
+    return trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).export(file_type="ply")
 
 
 @pytest.fixture(scope="module")
 def parts(template):
-    upper = region_spectrum(
-        template, ("left_thigh", "right_thigh", "left_shin", "right_shin", "left_foot", "right_foot")
+    return (
+        spectrum(region(template, LEGS)),
+        spectrum(region(template, HEAD_AND_ARMS)),
+        spectrum(region(template, ("left_upper_arm", "left_forearm", "left_hand"))),
     )
-    lower = region_spectrum(template, ("head", "neck", "left_upper_arm", "right_upper_arm", "left_hand", "right_hand"))
-    no_arm = region_spectrum(template, ("left_upper_arm", "left_forearm", "left_hand"))
-    return upper, lower, no_arm
+
+
+def union(client, spectra, files=None):
+    return client.post("/v1/union", data={"spectra": json.dumps(spectra)}, files=files)
 
 
 def test_union_is_commutative_monotone_and_inside_its_interval(client, parts):
     upper, lower, _ = parts
-    ab = client.post("/v1/union", json={"spectra": [upper, lower]})
-    ba = client.post("/v1/union", json={"spectra": [lower, upper]})
+    ab, ba = union(client, [upper, lower]), union(client, [lower, upper])
     assert ab.status_code == 200, ab.text
-    assert ab.json() == ba.json()
+    for key in ("eigenvalues", "sigma", "lower", "upper"):
+        assert ab.json()[key] == ba.json()[key]
     body = ab.json()
     values = np.array(body["eigenvalues"])
-    assert len(values) == 20 and body["operands"] == 2
+    assert len(values) == 20 and len(body["operands"]) == 2
     assert np.all(np.diff(values) >= 0) and np.all(values >= 0)
     assert np.all(np.array(body["lower"]) <= values) and np.all(values <= np.array(body["upper"]))
 
 
 def test_three_operands_fold_left_to_right(client, parts):
     upper, lower, no_arm = parts
-    chained = client.post("/v1/union", json={"spectra": [upper, lower, no_arm]}).json()
-    inner = client.post("/v1/union", json={"spectra": [upper, lower]}).json()["eigenvalues"]
-    outer = client.post("/v1/union", json={"spectra": [inner, no_arm]}).json()
+    chained = union(client, [upper, lower, no_arm]).json()
+    inner = union(client, [upper, lower]).json()["eigenvalues"]
+    outer = union(client, [inner, no_arm]).json()
     np.testing.assert_allclose(chained["eigenvalues"], outer["eigenvalues"], rtol=1e-6)
 
 
+def test_one_operand_is_returned_as_is(client, parts):
+    body = union(client, [parts[0]]).json()
+    np.testing.assert_allclose(body["eigenvalues"], parts[0], rtol=1e-6)
+    assert body["sigma"] == [0.0] * 20
+
+
+def test_a_file_operand_is_solved_server_side(client, template, parts):
+    mesh = region(template, LEGS)
+    files = [("files", ("upper.ply", io.BytesIO(ply_bytes(mesh)), "application/octet-stream"))]
+    response = union(client, [parts[1]], files=files)
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert [o["source"] for o in body["operands"]] == ["files[0] upper.ply", "spectra[0]"]
+    np.testing.assert_allclose(body["operands"][0]["eigenvalues"], parts[0], rtol=1e-6)
+    np.testing.assert_allclose(
+        body["eigenvalues"], union(client, [parts[0], parts[1]]).json()["eigenvalues"], rtol=1e-5
+    )
+
+
 @pytest.mark.parametrize(
-    "spectra, reason",
+    "spectra, says",
     [
-        ([[1.0] * 20], "one operand"),
-        ([[1.0] * 20, [1.0] * 19], "exactly 20"),
+        ([], "operands"),
+        ([[1.0] * 20, [1.0] * 19], "spectra[1]"),
         ([[1.0] * 20, [-5.0] + [1.0] * 19], "negative"),
         ([[1.0] * 20, list(range(20, 0, -1))], "ascending"),
-        ([[1.0] * 20] * 33, "33 operands"),
+        ([[1.0] * 20] * 33, "operands"),
+        ([[1.0] * 20, ["a"] * 20], "numbers"),
     ],
 )
-def test_bad_spectra_are_422_problems(client, spectra, reason):
-    response = client.post("/v1/union", json={"spectra": spectra})
-    assert response.status_code == 422, reason
+def test_bad_spectra_are_422_problems_naming_the_operand(client, spectra, says):
+    response = union(client, spectra)
+    assert response.status_code == 422
     assert response.headers["content-type"].startswith(PROBLEM)
-    assert response.json()["status"] == 422
+    assert says in response.json()["detail"]
 
 
-@pytest.mark.parametrize("literal", ["NaN", "Infinity", "1e400"])
-def test_non_finite_values_are_422_problems(client, literal):
-    body = '{"spectra": [[' + ",".join(["1.0"] * 19 + [literal]) + "], [" + ",".join(["1.0"] * 20) + "]]}"
-    response = client.post("/v1/union", content=body, headers={"content-type": "application/json"})
+@pytest.mark.parametrize("literal", ["NaN", "Infinity", "1e400", "[1, 2", "{}"])
+def test_non_finite_or_malformed_spectra_are_422_problems(client, literal):
+    text = "[[" + ",".join(["1.0"] * 19 + [literal]) + "], [" + ",".join(["1.0"] * 20) + "]]"
+    response = client.post("/v1/union", data={"spectra": text})
     assert response.status_code == 422
     assert response.headers["content-type"].startswith(PROBLEM)
 
 
+def test_a_broken_file_operand_is_a_problem_naming_it(client, parts):
+    files = [("files", ("scan.ply", io.BytesIO(b"ply\nformat nonsense\n"), "application/octet-stream"))]
+    response = union(client, [parts[0]], files=files)
+    assert response.status_code == 422
+    assert "files[0] scan.ply" in response.json()["detail"]
+
+
 def test_localize_reports_vertices_and_part_coverage(client, parts, template):
-    response = client.post("/v1/localize", json={"spectrum": parts[2]})
+    response = client.post("/v1/localize", data={"spectra": json.dumps([parts[2]])})
     assert response.status_code == 200, response.text
     body = response.json()
     assert body["template_vertices"] == len(template.vertices)
@@ -92,10 +132,10 @@ def test_localize_reports_vertices_and_part_coverage(client, parts, template):
     assert np.all((vertices >= 0) & (vertices < len(template.vertices))) and len(np.unique(vertices)) == len(vertices)
     assert set(body["part_coverage"]) == set(PART_NAMES)
     assert all(0 <= v <= 1 for v in body["part_coverage"].values())
-    assert 0 <= body["area_fraction"] <= 1 and not math.isnan(body["area_fraction"])
+    assert 0 <= body["area_fraction"] <= 1
 
 
 def test_models_describes_what_is_loaded(client, template):
     body = client.get("/v1/models").json()
     assert body["k"] == 20 and body["template_vertices"] == len(template.vertices)
-    assert body["parts"] == list(PART_NAMES)
+    assert body["parts"] == list(PART_NAMES) and len(body["model_version"]) == 12

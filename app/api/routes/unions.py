@@ -1,43 +1,53 @@
 """``/v1/union``, ``/v1/localize``, ``/v1/models``: the learned operators on spectra.
 
-Spectra come from ``/v1/spectrum`` (or a previous union) in 1/m², k of them. A union of more
-than two operands is folded left to right, exactly as the operator was trained to chain.
+Operands are uploaded files and/or spectra (see :mod:`app.api.operands`), in 1/m². A union of
+more than two operands is folded left to right, exactly as the operator was trained to chain.
 """
 
-from typing import Annotated
+import time
+from typing import Annotated, Literal
 
 import anyio
-from fastapi import APIRouter, Request
+import numpy as np
+from fastapi import APIRouter, File, Form, Query, Request, UploadFile
 from pydantic import BaseModel, Field
 
+from app.api.deps import SettingsDep
+from app.api.operands import Operand, resolve_operands
 from app.api.problems import problem_responses
-from app.inference.models import INTERVAL_Z, SpectralModels
-from app.inference.spectra import checked_spectrum
+from app.inference.models import INTERVAL_Z, SpectralModels, Union
 from app.inference.template import PART_NAMES
 
-MAX_OPERANDS = 32
-
 router = APIRouter(tags=["unions"])
-Spectrum = Annotated[list[float], Field(description="Eigenvalues in 1/m², ascending.")]
+
+FilesField = Annotated[
+    list[UploadFile] | None, File(description="Partial scans (mesh or point cloud), one operand each.")
+]
+SpectraField = Annotated[
+    str | None,
+    Form(description="JSON list of eigenvalue lists (1/m², ascending), e.g. a previous union.", examples=["[[...]]"]),
+]
+UnitsQuery = Annotated[Literal["m", "cm", "mm"], Query(description="Units of the uploaded files.")]
+ScaleQuery = Annotated[float | None, Query(gt=0, description="Factor to metres for the files; overrides units.")]
 
 
-class UnionRequest(BaseModel):
-    spectra: list[Spectrum] = Field(min_length=2, max_length=MAX_OPERANDS, description="Two or more operands.")
+class OperandSpectrum(BaseModel):
+    source: str = Field(description="files[i] <name> or spectra[i].")
+    eigenvalues: list[float]
 
 
 class UnionResponse(BaseModel):
-    eigenvalues: list[float] = Field(description="Predicted spectrum of the union, 1/m², non-decreasing.")
-    sigma: list[float] = Field(description="Per-eigenvalue standard deviation, calibrated on held-out data.")
+    eigenvalues: list[float] = Field(description="Spectrum of the union, 1/m², non-decreasing.")
+    sigma: list[float] = Field(description="Per-eigenvalue standard deviation, calibrated on held-out pairs.")
     lower: list[float] = Field(description="Lower end of the 90 % interval.")
     upper: list[float] = Field(description="Upper end of the 90 % interval.")
-    operands: int
+    operands: list[OperandSpectrum] = Field(description="Each operand's own spectrum, for caching.")
+    model_version: str
+    solve_ms: float = Field(description="Eigen-solves of the uploaded files.")
+    inference_ms: float
 
 
-class LocalizeRequest(BaseModel):
-    spectrum: Spectrum
-
-
-class LocalizeResponse(BaseModel):
+class LocalizeResponse(UnionResponse):
     vertices: list[int] = Field(description="Template vertices inside the region (or its mirror image).")
     area_fraction: float = Field(description="Share of the template's area covered.")
     part_coverage: dict[str, float] = Field(description="Covered share of each body part's area.")
@@ -45,6 +55,7 @@ class LocalizeResponse(BaseModel):
 
 
 class ModelsResponse(BaseModel):
+    model_version: str
     k: int
     units: str
     interval: str
@@ -56,27 +67,63 @@ def _models(request: Request) -> SpectralModels:
     return request.app.state.models
 
 
-@router.post("/union", response_model=UnionResponse, responses=problem_responses(422))
-async def union(request: Request, body: UnionRequest) -> UnionResponse:
-    """The spectrum of the union of partial shapes of one body, with a 90 % interval."""
+async def _union(request: Request, operands: list[Operand]) -> tuple[Union, float]:
     models = _models(request)
-    spectra = [checked_spectrum(s, models.k, f"spectra[{i}]") for i, s in enumerate(body.spectra)]
+    started = time.perf_counter()
+    spectra = [np.asarray(o.eigenvalues, dtype=np.float32) for o in operands]
     result = await anyio.to_thread.run_sync(models.union, spectra)
-    return UnionResponse(
-        eigenvalues=result.eigenvalues.tolist(),
-        sigma=result.sigma.tolist(),
-        lower=result.lower.tolist(),
-        upper=result.upper.tolist(),
-        operands=len(spectra),
-    )
+    return result, (time.perf_counter() - started) * 1e3
 
 
-@router.post("/localize", response_model=LocalizeResponse, responses=problem_responses(422))
-async def localize(request: Request, body: LocalizeRequest) -> LocalizeResponse:
-    """Where on the template body the region with this spectrum lies."""
+def _union_fields(models: SpectralModels, operands: list[Operand], result: Union, solve_ms: float, ms: float) -> dict:
+    return {
+        "eigenvalues": result.eigenvalues.tolist(),
+        "sigma": result.sigma.tolist(),
+        "lower": result.lower.tolist(),
+        "upper": result.upper.tolist(),
+        "operands": [OperandSpectrum(source=o.source, eigenvalues=o.eigenvalues) for o in operands],
+        "model_version": models.version,
+        "solve_ms": round(solve_ms, 2),
+        "inference_ms": round(ms, 2),
+    }
+
+
+@router.post("/union", response_model=UnionResponse, responses=problem_responses(413, 415, 422))
+async def union(
+    request: Request,
+    settings: SettingsDep,
+    files: FilesField = None,
+    spectra: SpectraField = None,
+    units: UnitsQuery = "m",
+    scale: ScaleQuery = None,
+) -> UnionResponse:
+    """Spectrum of the union of partial scans of one body, with a 90 % interval.
+
+    Two or more operands fold left to right, ((A ∪ B) ∪ C) ∪ …; one operand is returned as is
+    (σ = 0). The result is exactly the same whichever order two operands come in.
+    """
     models = _models(request)
-    region = await anyio.to_thread.run_sync(models.localize, checked_spectrum(body.spectrum, models.k))
+    operands, solve_ms = await resolve_operands(request, settings, files, spectra, models.k, units, scale, 1)
+    result, ms = await _union(request, operands)
+    return UnionResponse(**_union_fields(models, operands, result, solve_ms, ms))
+
+
+@router.post("/localize", response_model=LocalizeResponse, responses=problem_responses(413, 415, 422))
+async def localize(
+    request: Request,
+    settings: SettingsDep,
+    files: FilesField = None,
+    spectra: SpectraField = None,
+    units: UnitsQuery = "m",
+    scale: ScaleQuery = None,
+) -> LocalizeResponse:
+    """Where on the template body the union of the operands lies, and how much of each part it covers."""
+    models = _models(request)
+    operands, solve_ms = await resolve_operands(request, settings, files, spectra, models.k, units, scale, 1)
+    result, ms = await _union(request, operands)
+    region = await anyio.to_thread.run_sync(models.localize, result.eigenvalues)
     return LocalizeResponse(
+        **_union_fields(models, operands, result, solve_ms, ms),
         vertices=region.vertices.tolist(),
         area_fraction=region.area_fraction,
         part_coverage=region.part_coverage,
@@ -86,9 +133,10 @@ async def localize(request: Request, body: LocalizeRequest) -> LocalizeResponse:
 
 @router.get("/models", response_model=ModelsResponse)
 async def models_info(request: Request) -> ModelsResponse:
-    """What is loaded: k, units, the interval the union's sigma is calibrated for, the template."""
+    """What is loaded: versions, k, units, the union interval's meaning, the template."""
     models = _models(request)
     return ModelsResponse(
+        model_version=models.version,
         k=models.k,
         units="eigenvalues in 1/m² of shapes in metres",
         interval=f"eigenvalues ± {INTERVAL_Z}·sigma holds 90 % of held-out eigenvalues",

@@ -1,0 +1,92 @@
+"""Operands of the spectral endpoints: uploaded files and spectra the client already has.
+
+Files (multipart field ``files``, repeated) are solved server-side, off the event loop, with
+the service's bounded concurrency; spectra (form field ``spectra``, a JSON list of eigenvalue
+lists) are checked. Operands are taken in that order: files as uploaded, then spectra. An
+error names the operand it is about.
+"""
+
+import json
+import time
+from dataclasses import dataclass
+from typing import Literal
+
+import anyio
+import numpy as np
+from fastapi import Request, UploadFile
+
+from app.core.config import Settings
+from app.geometry.errors import GeometryError
+from app.geometry.io import resolve_file_type
+from app.geometry.pipeline import SpectrumOptions, SpectrumReport, spectrum_from_bytes
+from app.inference.spectra import InvalidSpectrum, checked_spectrum
+
+MAX_OPERANDS = 32
+
+
+@dataclass(frozen=True)
+class Operand:
+    source: str  # "files[0] scan.ply" or "spectra[1]"
+    eigenvalues: list[float]
+    report: SpectrumReport | None  # what the solve found, for files
+
+
+def parse_spectra(text: str | None, k: int) -> list[list[float]]:
+    """The ``spectra`` form field as checked eigenvalue lists."""
+    if text is None or not text.strip():
+        return []
+    try:
+        values = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InvalidSpectrum(f"spectra must be a JSON list of eigenvalue lists: {exc}") from exc
+    if not isinstance(values, list) or not all(isinstance(v, list) for v in values):
+        raise InvalidSpectrum("spectra must be a JSON list of eigenvalue lists")
+    checked = []
+    for index, value in enumerate(values):
+        try:
+            array = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise InvalidSpectrum(f"spectra[{index}] must hold numbers only") from exc
+        checked.append(checked_spectrum(array, k, f"spectra[{index}]").tolist())
+    return checked
+
+
+async def resolve_operands(
+    request: Request,
+    settings: Settings,
+    files: list[UploadFile] | None,
+    spectra: str | None,
+    k: int,
+    units: Literal["m", "cm", "mm"],
+    scale: float | None,
+    minimum: int,
+) -> tuple[list[Operand], float]:
+    """Every operand's spectrum, and the milliseconds spent solving uploaded files."""
+    given = parse_spectra(spectra, k)
+    files = files or []
+    count = len(files) + len(given)
+    if not minimum <= count <= MAX_OPERANDS:
+        raise InvalidSpectrum(f"expected {minimum} to {MAX_OPERANDS} operands (files and spectra), got {count}")
+    options = SpectrumOptions(
+        k=k, units=units, scale=scale, max_vertices=settings.max_vertices, max_hole_edges=settings.max_hole_edges
+    )
+    operands: list[Operand] = []
+    started = time.perf_counter()
+    for index, upload in enumerate(files):
+        source = f"files[{index}] {upload.filename or ''}".strip()
+        data = await upload.read()
+        try:
+            report = await anyio.to_thread.run_sync(
+                spectrum_from_bytes,
+                data,
+                resolve_file_type(upload.filename, None),
+                options,
+                limiter=request.app.state.solver_limiter,
+            )
+        except GeometryError as exc:
+            exc.args = (f"{source}: {exc}",)
+            raise
+        operands.append(Operand(source, report.eigenvalues, report))
+    solve_ms = (time.perf_counter() - started) * 1e3
+    operands += [Operand(f"spectra[{i}]", values, None) for i, values in enumerate(given)]
+    return operands, solve_ms
