@@ -8,10 +8,11 @@ from fastapi import FastAPI
 
 from app import __version__
 from app.api.problems import install_problem_handlers
-from app.api.routes import health, spectrum, unions
+from app.api.routes import health, shapes, spectrum, unions
 from app.api.upload_limit import UploadLimitMiddleware
 from app.core.config import Settings, get_settings
 from app.inference.models import SpectralModels
+from app.retrieval.seed import open_store
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -22,6 +23,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         app.state.solver_limiter = anyio.CapacityLimiter(settings.solver_concurrency)
         app.state.models = SpectralModels(settings.models_dir)  # a broken artefact fails start-up
+        app.state.store = open_store(settings.database_path, settings.models_dir)
         app.state.ready = True
         yield
         app.state.ready = False
@@ -38,4 +40,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(health.router)
     app.include_router(spectrum.router, prefix="/v1")
     app.include_router(unions.router, prefix="/v1")
+    app.include_router(shapes.router, prefix="/v1")
     return app

@@ -4,7 +4,7 @@ import os
 from functools import lru_cache
 from pathlib import Path
 
-from pydantic import Field
+from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
@@ -24,6 +24,11 @@ class Settings(BaseSettings):
         Path(__file__).resolve().parents[2] / "models",
         description="Directory with union.onnx, localizer.onnx and the template (the repository's models/).",
     )
+    database_path: Path = Field(
+        Path("spectral-unions.sqlite"),
+        description="SQLite file of the ShapeDNA store; created and seeded from models/shapes.npz when new.",
+    )
+    api_key: SecretStr | None = Field(None, description="Key for writes to /v1/shapes; writes are refused without.")
     solver_concurrency: int = Field(
         default_factory=lambda: max(1, os.cpu_count() or 1),
         gt=0,

@@ -21,7 +21,7 @@ class InvalidSpectrum(GeometryError):
 
 
 def checked_spectrum(values: list[float] | np.ndarray, k: int, name: str = "spectrum") -> np.ndarray:
-    """The values as a float32 (k,) array, or :class:`InvalidSpectrum` saying what is wrong."""
+    """The values as a float64 (k,) array, or :class:`InvalidSpectrum` saying what is wrong."""
     spectrum = np.asarray(values, dtype=np.float64)
     if spectrum.shape != (k,):
         raise InvalidSpectrum(f"{name} must hold exactly {k} eigenvalues, got {spectrum.size}")
@@ -32,4 +32,4 @@ def checked_spectrum(values: list[float] | np.ndarray, k: int, name: str = "spec
         raise InvalidSpectrum(f"{name} has negative eigenvalues: Laplace–Beltrami spectra are ≥ 0")
     if np.any(np.diff(spectrum) < -ORDER_TOLERANCE * scale):
         raise InvalidSpectrum(f"{name} is not in ascending order")
-    return np.clip(spectrum, 0, None).astype(np.float32)
+    return np.clip(spectrum, 0, None)

@@ -70,7 +70,7 @@ def _models(request: Request) -> SpectralModels:
 async def _union(request: Request, operands: list[Operand]) -> tuple[Union, float]:
     models = _models(request)
     started = time.perf_counter()
-    spectra = [np.asarray(o.eigenvalues, dtype=np.float32) for o in operands]
+    spectra = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
     result = await anyio.to_thread.run_sync(models.union, spectra)
     return result, (time.perf_counter() - started) * 1e3
 

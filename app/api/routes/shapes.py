@@ -1,0 +1,142 @@
+"""``/v1/retrieve`` and ``/v1/shapes``: the ShapeDNA database of complete shapes.
+
+Reads are open; writes (add, delete) need the ``X-API-Key`` header to match the configured
+key, compared in constant time. With no key configured, writes are refused outright.
+"""
+
+import hmac
+from typing import Annotated
+
+import anyio
+import numpy as np
+from fastapi import APIRouter, File, Form, Header, Path, Query, Request, Response, UploadFile
+from pydantic import BaseModel, Field
+
+from app.api.deps import SettingsDep
+from app.api.operands import resolve_operands
+from app.api.problems import ProblemError, problem_responses
+from app.api.routes.unions import FilesField, ScaleQuery, SpectraField, UnitsQuery
+from app.geometry.io import resolve_file_type
+from app.geometry.pipeline import SpectrumOptions, spectrum_from_bytes
+from app.retrieval.store import SQLiteStore
+
+router = APIRouter(tags=["retrieval"])
+MAX_TOP = 100
+
+
+class ShapeOut(BaseModel):
+    id: str
+    label: str = Field(description="Identity label.")
+    source: str = Field(description="seed (the benchmark's complete shapes) or the uploaded file name.")
+    spectrum: list[float]
+    created_at: str
+
+
+class ShapePage(BaseModel):
+    total: int
+    offset: int
+    shapes: list[ShapeOut]
+
+
+class MatchOut(BaseModel):
+    id: str
+    label: str
+    distance: float = Field(description="ShapeDNA distance: Euclidean on log λ₂…λ_k.")
+
+
+class RetrieveResponse(BaseModel):
+    query: list[float] = Field(description="The union spectrum that was looked up.")
+    matches: list[MatchOut]
+
+
+def _store(request: Request) -> SQLiteStore:
+    return request.app.state.store
+
+
+def _require_key(settings, given: str | None) -> None:
+    expected = settings.api_key.get_secret_value() if settings.api_key else None
+    if expected is None:
+        raise ProblemError(403, "writes-disabled", "Writes disabled", "no API key is configured on this server")
+    if given is None or not hmac.compare_digest(given.encode(), expected.encode()):
+        raise ProblemError(401, "invalid-api-key", "Invalid API key", "X-API-Key is missing or wrong")
+
+
+@router.post("/retrieve", response_model=RetrieveResponse, responses=problem_responses(413, 415, 422))
+async def retrieve(
+    request: Request,
+    settings: SettingsDep,
+    files: FilesField = None,
+    spectra: SpectraField = None,
+    units: UnitsQuery = "m",
+    scale: ScaleQuery = None,
+    top: Annotated[int, Query(ge=1, le=MAX_TOP, description="Number of matches.")] = 10,
+) -> RetrieveResponse:
+    """The stored complete shapes nearest to the union of the operands."""
+    models = request.app.state.models
+    operands, _ = await resolve_operands(request, settings, files, spectra, models.k, units, scale, 1)
+    union = await anyio.to_thread.run_sync(models.union, [np.asarray(o.eigenvalues) for o in operands])
+    matches = await anyio.to_thread.run_sync(_store(request).nearest, union.eigenvalues, top)
+    return RetrieveResponse(
+        query=union.eigenvalues.tolist(),
+        matches=[MatchOut(id=m.record.id, label=m.record.label, distance=m.distance) for m in matches],
+    )
+
+
+@router.post("/shapes", response_model=ShapeOut, status_code=201, responses=problem_responses(401, 403, 413, 415, 422))
+async def add_shape(
+    request: Request,
+    settings: SettingsDep,
+    file: Annotated[UploadFile, File(description="A complete (closed) shape.")],
+    label: Annotated[str, Form(min_length=1, max_length=200, description="Identity label.")],
+    units: UnitsQuery = "m",
+    scale: ScaleQuery = None,
+    x_api_key: Annotated[str | None, Header()] = None,
+) -> ShapeOut:
+    """Compute a complete shape's spectrum and store it under an identity label."""
+    _require_key(settings, x_api_key)
+    options = SpectrumOptions(
+        k=request.app.state.models.k,
+        units=units,
+        scale=scale,
+        max_vertices=settings.max_vertices,
+        max_hole_edges=settings.max_hole_edges,
+    )
+    data = await file.read()
+    report = await anyio.to_thread.run_sync(
+        spectrum_from_bytes,
+        data,
+        resolve_file_type(file.filename, None),
+        options,
+        limiter=request.app.state.solver_limiter,
+    )
+    record = await anyio.to_thread.run_sync(
+        _store(request).add, label, np.asarray(report.eigenvalues), file.filename or "upload"
+    )
+    return ShapeOut(**record.__dict__)
+
+
+@router.get("/shapes", response_model=ShapePage)
+async def list_shapes(
+    request: Request,
+    offset: Annotated[int, Query(ge=0)] = 0,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+) -> ShapePage:
+    """Stored shapes, oldest first, a page at a time."""
+    store = _store(request)
+    records = await anyio.to_thread.run_sync(store.page, offset, limit)
+    total = await anyio.to_thread.run_sync(store.count)
+    return ShapePage(total=total, offset=offset, shapes=[ShapeOut(**r.__dict__) for r in records])
+
+
+@router.delete("/shapes/{shape_id}", status_code=204, responses=problem_responses(401, 403, 404))
+async def delete_shape(
+    request: Request,
+    settings: SettingsDep,
+    shape_id: Annotated[str, Path(max_length=64)],
+    x_api_key: Annotated[str | None, Header()] = None,
+) -> Response:
+    """Remove a stored shape."""
+    _require_key(settings, x_api_key)
+    if not await anyio.to_thread.run_sync(_store(request).delete, shape_id):
+        raise ProblemError(404, "shape-not-found", "Shape not found", f"no shape with id {shape_id}")
+    return Response(status_code=204)

@@ -1,0 +1,1 @@
+"""Identity retrieval: a ShapeDNA database of complete shapes, queried by spectrum."""

@@ -1,0 +1,23 @@
+"""The ShapeDNA distance used for retrieval.
+
+Euclidean distance between log-eigenvalues λ₂…λ_k: the log makes a 5 % change weigh the same
+for a low and a high eigenvalue (raw differences would be ruled by the top of the spectrum),
+and λ₁ is left out because it is 0 for every closed surface. No area normalisation: body size
+is part of what identifies a person.
+"""
+
+import numpy as np
+
+FLOOR = 1e-9
+
+
+def features(spectra: np.ndarray) -> np.ndarray:
+    """(m, k) spectra → (m, k - 1) retrieval features."""
+    return np.log(np.clip(np.atleast_2d(spectra)[:, 1:], FLOOR, None))
+
+
+def distances(query: np.ndarray, spectra: np.ndarray) -> np.ndarray:
+    """(m,) distances from one (k,) spectrum to each of (m, k) stored spectra."""
+    if len(spectra) == 0:
+        return np.zeros(0)
+    return np.linalg.norm(features(spectra) - features(query), axis=1)
