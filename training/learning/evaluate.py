@@ -77,12 +77,13 @@ def spectral_errors(predicted: np.ndarray, truth: np.ndarray) -> dict:
     """
     difference = predicted - truth
     meaningful = truth > 1e-6
-    relative = np.where(meaningful, np.abs(difference) / np.where(meaningful, truth, 1), np.nan)
+    relative = np.where(meaningful, np.abs(difference) / np.where(meaningful, truth, 1), 0.0)
+    per_index = relative.sum(0) / np.maximum(meaningful.sum(0), 1)
     return {
         "mse": float(np.mean(difference**2)),
         "mae": float(np.mean(np.abs(difference))),
-        "mre": float(np.nanmean(relative)),
-        "mre_per_eigenvalue": [round(float(x), 5) for x in np.nanmean(relative, axis=0)],
+        "mre": float(relative.sum() / max(meaningful.sum(), 1)),
+        "mre_per_eigenvalue": [round(float(x), 5) for x in per_index],
     }
 
 

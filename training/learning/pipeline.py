@@ -13,13 +13,16 @@ from pathlib import Path
 
 import numpy as np
 
+from app.retrieval.seed import SEED_FILE
+from training.learning.baselines import elementwise_min, larger_part
 from training.learning.card import update_card
 from training.learning.data import SpectralData
 from training.learning.evaluate import evaluate
 from training.learning.export import export_localizer, export_union, localizer_parity, union_parity
 from training.learning.localizer_net import Localizer, LocalizerConfig
-from training.learning.train_localizer import LocalizerTraining, train_localizer
-from training.learning.train_union import UnionTraining, train_union
+from training.learning.shapedna import complete_shapes, retrieval_table, save_seed
+from training.learning.train_localizer import LocalizerTraining, template_basis, train_localizer
+from training.learning.train_union import UnionTraining, predict, train_union
 
 UNION_FILE, LOCALIZER_FILE = "union.onnx", "localizer.onnx"
 
@@ -75,9 +78,27 @@ def run_pipeline(data_dir: Path, runs: Path, models: Path, preset: TrainingPrese
         "localizer": localizer_parity(localizers["all"], models / LOCALIZER_FILE, real.union),
     }
     metrics = evaluate(data, union, localizers)
+    labels, complete, identity = complete_shapes(data)
+    save_seed(models / SEED_FILE, labels, complete)
+    metrics["retrieval"] = retrieval_table(data, retrieval_queries(data, union), complete, identity)
     metrics["parity_max_relative"] = parity
     metrics["seconds"] = {"training": round(trained - started, 1), "total": round(time.perf_counter() - started, 1)}
     metrics["data"] = json.loads((data_dir / "manifest.json").read_text())
     (models / "metrics.json").write_text(json.dumps(metrics, indent=1))
     update_card(models / "MODEL_CARD.md", metrics, command)
     return metrics
+
+
+def retrieval_queries(data: SpectralData, union) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Full-coverage test pairs (every variant): their predicted union and two part-only baselines."""
+    pairs = data.pairs
+    rows = pairs.rows(
+        np.flatnonzero((pairs.split != "train") & (pairs.split != "validation") & (pairs.scenario == "full"))
+    )
+    _, vertex_area = template_basis(data, 1)
+    areas = data.masks(rows.mask_a) @ vertex_area, data.masks(rows.mask_b) @ vertex_area
+    return {
+        "operator_union": (predict(union, rows.a, rows.b)[0], rows.shape_a),
+        "elementwise_min": (elementwise_min(rows.a, rows.b), rows.shape_a),
+        "larger_part": (larger_part(rows.a, rows.b, *areas), rows.shape_a),
+    }
