@@ -23,7 +23,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         app.state.solver_limiter = anyio.CapacityLimiter(settings.solver_concurrency)
         app.state.models = SpectralModels(settings.models_dir)  # a broken artefact fails start-up
-        app.state.store = open_store(settings.database_path, settings.models_dir)
+        app.state.store = open_store(settings.database_path, settings.database_url, settings.models_dir)
         app.state.ready = True
         yield
         app.state.ready = False

@@ -28,6 +28,9 @@ class Settings(BaseSettings):
         Path("spectral-unions.sqlite"),
         description="SQLite file of the ShapeDNA store; created and seeded from models/shapes.npz when new.",
     )
+    database_url: str | None = Field(
+        None, pattern=r"^postgres(ql)?://", description="PostgreSQL URL; replaces the SQLite file (replicas share it)."
+    )
     api_key: SecretStr | None = Field(None, description="Key for writes to /v1/shapes; writes are refused without.")
     solver_concurrency: int = Field(
         default_factory=lambda: max(1, os.cpu_count() or 1),

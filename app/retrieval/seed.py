@@ -8,15 +8,23 @@ from pathlib import Path
 
 import numpy as np
 
-from app.retrieval.store import SQLiteStore
+from app.retrieval.store import ShapeStore, SQLiteStore
 
 SEED_FILE = "shapes.npz"
 SEED_SOURCE = "seed"
 
 
-def open_store(database: Path, models: Path) -> SQLiteStore:
-    """Open (creating if needed) the store, seeding it when it is empty and a seed file exists."""
-    store = SQLiteStore(database)
+def open_store(database: Path, url: str | None, models: Path) -> ShapeStore:
+    """Open (creating if needed) the store, seeding it when it is empty and a seed file exists.
+
+    PostgreSQL when ``url`` is given (``postgresql://…``), else the SQLite file ``database``.
+    """
+    if url:
+        from app.retrieval.postgres import PostgresStore
+
+        store: ShapeStore = PostgresStore(url)
+    else:
+        store = SQLiteStore(database)
     seed = models / SEED_FILE
     if store.count() == 0 and seed.exists():
         data = np.load(seed)

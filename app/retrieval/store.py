@@ -13,6 +13,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -42,6 +43,19 @@ class ShapeRecord:
 class Match:
     record: ShapeRecord
     distance: float
+
+
+class ShapeStore(Protocol):
+    """What the API needs from a store; :class:`SQLiteStore` and ``PostgresStore`` provide it."""
+
+    backend: str
+
+    def add(self, label: str, spectrum: np.ndarray, source: str) -> ShapeRecord: ...
+    def add_many(self, labels: list[str], spectra: np.ndarray, source: str) -> int: ...
+    def count(self) -> int: ...
+    def page(self, offset: int, limit: int) -> list[ShapeRecord]: ...
+    def delete(self, shape_id: str) -> bool: ...
+    def nearest(self, spectrum: np.ndarray, top: int) -> list[Match]: ...
 
 
 class SQLiteStore:

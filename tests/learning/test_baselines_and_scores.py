@@ -50,3 +50,19 @@ def test_symmetric_scores_hand_checked():
     iou, accuracy = symmetric_scores(predicted, truth, weights, mirror)
     np.testing.assert_allclose(iou, [1.0, 1 / 3, 0.0])
     np.testing.assert_allclose(accuracy, [1.0, 6 / 8, 1 / 8])
+
+
+def test_retrieval_hit_rates_hand_checked():
+    """Three people, two poses each; a query may not match the shape its scans came from."""
+    from training.learning.shapedna import hit_rates
+
+    base = np.sort(np.random.default_rng(1).uniform(1, 50, 20))
+    people = np.array([0, 0, 1, 1, 2, 2])
+    stored = np.stack([base * s for s in (1.0, 1.01, 1.3, 1.31, 1.7, 1.71)])
+    stored[:, 0] = 0  # closed bodies: λ₁ = 0, ignored by the distance
+    queries = stored[[0, 2]] * 1.001
+    rates = hit_rates(queries, people[[0, 2]], np.array([0, 2]), stored, people)
+    assert rates == {"top1": 1.0, "top5": 1.0, "top10": 1.0}
+    # Asked as person 2, the first query ranks person 0 and then person 1 above person 2 (4th).
+    rates = hit_rates(queries[:1], np.array([2]), np.array([0]), stored, people)
+    assert rates == {"top1": 0.0, "top5": 1.0, "top10": 1.0}

@@ -18,7 +18,7 @@ from app.api.problems import ProblemError, problem_responses
 from app.api.routes.unions import FilesField, ScaleQuery, SpectraField, UnitsQuery
 from app.geometry.io import resolve_file_type
 from app.geometry.pipeline import SpectrumOptions, spectrum_from_bytes
-from app.retrieval.store import SQLiteStore
+from app.retrieval.store import ShapeStore
 
 router = APIRouter(tags=["retrieval"])
 MAX_TOP = 100
@@ -49,7 +49,7 @@ class RetrieveResponse(BaseModel):
     matches: list[MatchOut]
 
 
-def _store(request: Request) -> SQLiteStore:
+def _store(request: Request) -> ShapeStore:
     return request.app.state.store
 
 
