@@ -7,6 +7,8 @@ import anyio
 from fastapi import FastAPI
 
 from app import __version__
+from app.api.metrics import MetricsMiddleware
+from app.api.metrics import router as metrics_router
 from app.api.problems import install_problem_handlers
 from app.api.routes import health, shapes, spectrum, unions
 from app.api.upload_limit import UploadLimitMiddleware
@@ -36,8 +38,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = settings
     app.add_middleware(UploadLimitMiddleware, max_bytes=settings.max_upload_bytes)
+    app.add_middleware(MetricsMiddleware)
     install_problem_handlers(app)
     app.include_router(health.router)
+    app.include_router(metrics_router)
     app.include_router(spectrum.router, prefix="/v1")
     app.include_router(unions.router, prefix="/v1")
     app.include_router(shapes.router, prefix="/v1")

@@ -15,6 +15,7 @@ import anyio
 import numpy as np
 from fastapi import Request, UploadFile
 
+from app.api.metrics import SOLVES
 from app.core.config import Settings
 from app.geometry.errors import GeometryError
 from app.geometry.io import resolve_file_type
@@ -86,6 +87,7 @@ async def resolve_operands(
         except GeometryError as exc:
             exc.args = (f"{source}: {exc}",)
             raise
+        SOLVES.observe((report.assembly_ms + report.solve_ms) / 1e3)
         operands.append(Operand(source, report.eigenvalues, report))
     solve_ms = (time.perf_counter() - started) * 1e3
     operands += [Operand(f"spectra[{i}]", values, None) for i, values in enumerate(given)]

@@ -139,3 +139,12 @@ def test_models_describes_what_is_loaded(client, template):
     body = client.get("/v1/models").json()
     assert body["k"] == 20 and body["template_vertices"] == len(template.vertices)
     assert body["parts"] == list(PART_NAMES) and len(body["model_version"]) == 12
+
+
+def test_metrics_count_requests_by_endpoint(client, parts):
+    union(client, [parts[0], parts[1]])
+    client.delete("/v1/shapes/some-id-that-is-not-there", headers={"X-API-Key": "x"})
+    text = client.get("/metrics").text
+    assert 'spectral_unions_requests_total{handler="union",method="POST",status="200"}' in text
+    assert 'handler="delete_shape",method="DELETE",status="401"' in text and "some-id-that-is-not-there" not in text
+    assert 'spectral_unions_inference_seconds_count{model="union"}' in text

@@ -7,6 +7,7 @@ import anyio
 from fastapi import APIRouter, File, Form, Query, Request, UploadFile
 
 from app.api.deps import SettingsDep
+from app.api.metrics import SOLVES
 from app.api.problems import problem_responses
 from app.geometry.errors import InvalidGeometry
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
@@ -44,13 +45,15 @@ async def spectrum(
         max_vertices=settings.max_vertices,
         max_hole_edges=settings.max_hole_edges,
     )
-    return await anyio.to_thread.run_sync(
+    report = await anyio.to_thread.run_sync(
         spectrum_from_bytes,
         data,
         resolved_type,
         options,
         limiter=request.app.state.solver_limiter,
     )
+    SOLVES.observe((report.assembly_ms + report.solve_ms) / 1e3)
+    return report
 
 
 def _parse_indices(text: str | None) -> list[int] | None:

@@ -13,6 +13,7 @@ from fastapi import APIRouter, File, Form, Query, Request, UploadFile
 from pydantic import BaseModel, Field
 
 from app.api.deps import SettingsDep
+from app.api.metrics import INFERENCE
 from app.api.operands import Operand, resolve_operands
 from app.api.problems import problem_responses
 from app.inference.models import INTERVAL_Z, SpectralModels, Union
@@ -72,7 +73,9 @@ async def _union(request: Request, operands: list[Operand]) -> tuple[Union, floa
     started = time.perf_counter()
     spectra = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
     result = await anyio.to_thread.run_sync(models.union, spectra)
-    return result, (time.perf_counter() - started) * 1e3
+    seconds = time.perf_counter() - started
+    INFERENCE.labels("union").observe(seconds)
+    return result, seconds * 1e3
 
 
 def _union_fields(models: SpectralModels, operands: list[Operand], result: Union, solve_ms: float, ms: float) -> dict:
@@ -121,7 +124,9 @@ async def localize(
     models = _models(request)
     operands, solve_ms = await resolve_operands(request, settings, files, spectra, models.k, units, scale, 1)
     result, ms = await _union(request, operands)
+    started = time.perf_counter()
     region = await anyio.to_thread.run_sync(models.localize, result.eigenvalues)
+    INFERENCE.labels("localizer").observe(time.perf_counter() - started)
     return LocalizeResponse(
         **_union_fields(models, operands, result, solve_ms, ms),
         vertices=region.vertices.tolist(),
