@@ -39,8 +39,8 @@ TRAINING_PRESETS = {
     # one cosine cycle at a higher rate and no dropout learn more per minute than the paper's
     # schedule, whose first restart alone would take most of the budget.
     "standard": TrainingPreset(
-        UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0),
-        LocalizerTraining(epochs=12, batch=128, first_restart=12),
+        UnionTraining(epochs=8, batch=64, learning_rate=1e-3, first_restart=8, dropout=0.0),
+        LocalizerTraining(epochs=8, batch=128, first_restart=8),
     ),
 }
 
