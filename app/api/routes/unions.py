@@ -9,7 +9,7 @@ from typing import Annotated, Literal
 
 import anyio
 import numpy as np
-from fastapi import APIRouter, File, Form, Query, Request, UploadFile
+from fastapi import APIRouter, File, Form, Query, Request, Response, UploadFile
 from pydantic import BaseModel, Field
 
 from app.api.deps import SettingsDep
@@ -17,7 +17,7 @@ from app.api.metrics import INFERENCE
 from app.api.operands import Operand, resolve_operands
 from app.api.problems import problem_responses
 from app.inference.models import INTERVAL_Z, SpectralModels, Union
-from app.inference.template import PART_NAMES
+from app.inference.template import PART_NAMES, coloured_template
 
 router = APIRouter(tags=["unions"])
 
@@ -111,7 +111,11 @@ async def union(
     return UnionResponse(**_union_fields(models, operands, result, solve_ms, ms))
 
 
-@router.post("/localize", response_model=LocalizeResponse, responses=problem_responses(413, 415, 422))
+@router.post(
+    "/localize",
+    response_model=LocalizeResponse,
+    responses={**problem_responses(413, 415, 422), 200: {"content": {"application/ply": {}}}},
+)
 async def localize(
     request: Request,
     settings: SettingsDep,
@@ -119,7 +123,10 @@ async def localize(
     spectra: SpectraField = None,
     units: UnitsQuery = "m",
     scale: ScaleQuery = None,
-) -> LocalizeResponse:
+    format: Annotated[
+        Literal["json", "ply"], Query(description="ply: the template mesh with the region as vertex colours.")
+    ] = "json",
+) -> LocalizeResponse | Response:
     """Where on the template body the union of the operands lies, and how much of each part it covers."""
     models = _models(request)
     operands, solve_ms = await resolve_operands(request, settings, files, spectra, models.k, units, scale, 1)
@@ -127,6 +134,11 @@ async def localize(
     started = time.perf_counter()
     region = await anyio.to_thread.run_sync(models.localize, result.eigenvalues)
     INFERENCE.labels("localizer").observe(time.perf_counter() - started)
+    if format == "ply":
+        ply = await anyio.to_thread.run_sync(coloured_template, models.template, region.vertices)
+        return Response(
+            ply, media_type="application/ply", headers={"content-disposition": "inline; filename=region.ply"}
+        )
     return LocalizeResponse(
         **_union_fields(models, operands, result, solve_ms, ms),
         vertices=region.vertices.tolist(),
