@@ -52,6 +52,15 @@ def parse_spectra(text: str | None, k: int) -> list[list[float]]:
     return checked
 
 
+async def solve_upload(request: Request, data: bytes, file_type: str, options: SpectrumOptions) -> SpectrumReport:
+    """One uploaded shape's spectrum, solved off the event loop within the service's solve slots."""
+    report = await anyio.to_thread.run_sync(
+        spectrum_from_bytes, data, file_type, options, limiter=request.app.state.solver_limiter
+    )
+    SOLVES.observe((report.assembly_ms + report.solve_ms) / 1e3)
+    return report
+
+
 async def resolve_operands(
     request: Request,
     settings: Settings,
@@ -60,14 +69,13 @@ async def resolve_operands(
     k: int,
     units: Literal["m", "cm", "mm"],
     scale: float | None,
-    minimum: int,
 ) -> tuple[list[Operand], float]:
-    """Every operand's spectrum, and the milliseconds spent solving uploaded files."""
+    """Every operand's spectrum (at least one), and the milliseconds spent solving uploaded files."""
     given = parse_spectra(spectra, k)
     files = files or []
     count = len(files) + len(given)
-    if not minimum <= count <= MAX_OPERANDS:
-        raise InvalidSpectrum(f"expected {minimum} to {MAX_OPERANDS} operands (files and spectra), got {count}")
+    if not 1 <= count <= MAX_OPERANDS:
+        raise InvalidSpectrum(f"expected 1 to {MAX_OPERANDS} operands (files and spectra), got {count}")
     options = SpectrumOptions(
         k=k, units=units, scale=scale, max_vertices=settings.max_vertices, max_hole_edges=settings.max_hole_edges
     )
@@ -77,17 +85,10 @@ async def resolve_operands(
         source = f"files[{index}] {upload.filename or ''}".strip()
         data = await upload.read()
         try:
-            report = await anyio.to_thread.run_sync(
-                spectrum_from_bytes,
-                data,
-                resolve_file_type(upload.filename, None),
-                options,
-                limiter=request.app.state.solver_limiter,
-            )
+            report = await solve_upload(request, data, resolve_file_type(upload.filename, None), options)
         except GeometryError as exc:
             exc.args = (f"{source}: {exc}",)
             raise
-        SOLVES.observe((report.assembly_ms + report.solve_ms) / 1e3)
         operands.append(Operand(source, report.eigenvalues, report))
     solve_ms = (time.perf_counter() - started) * 1e3
     operands += [Operand(f"spectra[{i}]", values, None) for i, values in enumerate(given)]

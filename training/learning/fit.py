@@ -42,6 +42,20 @@ class Progress:
     best_epoch: int = -1
     stale_epochs: int = 0
 
+    def finish_epoch(self, epoch: int, metric: float) -> bool:
+        """Record a finished epoch's validation metric; True when it is the best so far."""
+        self.epoch = epoch + 1
+        if metric < self.best_metric:
+            self.best_metric, self.best_epoch, self.stale_epochs = metric, epoch, 0
+            return True
+        self.stale_epochs += 1
+        return False
+
+
+def snapshot(model: torch.nn.Module) -> dict:
+    """A detached copy of the weights (the best epoch's, kept while training goes on)."""
+    return {k: v.detach().clone() for k, v in model.state_dict().items()}
+
 
 def save_checkpoint(
     path: Path,

@@ -25,6 +25,7 @@ from training.learning.fit import (
     pick_device,
     save_checkpoint,
     seed_everything,
+    snapshot,
 )
 from training.learning.localizer_net import Localizer, LocalizerConfig, feature_statistics
 from training.learning.masks import symmetric_scores
@@ -112,7 +113,7 @@ def train_localizer(
         "training": asdict(settings),
         "identities": None if identities is None else [int(i) for i in identities],
     }
-    progress, best = Progress(), {k: v.clone() for k, v in model.state_dict().items()}
+    progress, best = Progress(), snapshot(model)
     if checkpoint.exists():
         progress, best = load_checkpoint(checkpoint, model, optimizer, schedule, generator)
     weights = torch.as_tensor(areas / areas.sum(), dtype=torch.float32, device=device)
@@ -136,12 +137,8 @@ def train_localizer(
             optimizer.step()
             schedule.step(epoch + (step + 1) / steps)
         iou, _ = symmetric_scores(localize(model, validation_spectra), validation_masks, areas, data.template.mirror)
-        progress.epoch = epoch + 1
-        if -iou.mean() < progress.best_metric:
-            progress.best_metric, progress.best_epoch, progress.stale_epochs = -float(iou.mean()), epoch, 0
-            best = {k: v.detach().clone() for k, v in model.state_dict().items()}
-        else:
-            progress.stale_epochs += 1
+        if progress.finish_epoch(epoch, -float(iou.mean())):
+            best = snapshot(model)
         bar.set_postfix(val_iou=f"{iou.mean():.4f}", best=f"{-progress.best_metric:.4f}")
         save_checkpoint(checkpoint, model, optimizer, schedule, run_config, progress, best, generator)
         if progress.stale_epochs >= settings.patience:

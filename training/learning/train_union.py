@@ -21,6 +21,7 @@ from training.learning.fit import (
     pick_device,
     save_checkpoint,
     seed_everything,
+    snapshot,
 )
 from training.learning.union_net import UnionConfig, UnionOperator
 
@@ -107,7 +108,7 @@ def train_union(
         model, settings.learning_rate, settings.weight_decay, settings.first_restart
     )
     run_config = {"model": config.as_dict(), "training": asdict(settings)}
-    progress, best = Progress(), {k: v.clone() for k, v in model.state_dict().items()}
+    progress, best = Progress(), snapshot(model)
     if checkpoint.exists():
         progress, best = load_checkpoint(checkpoint, model, optimizer, schedule, generator)
     pairs = data.pairs
@@ -138,12 +139,8 @@ def train_union(
             schedule.step(epoch + (step + 1) / steps)
         mean, _ = predict(model, validation.a, validation.b)
         mae = float(np.abs(mean - validation.union).mean())
-        progress.epoch = epoch + 1
-        if mae < progress.best_metric:
-            progress.best_metric, progress.best_epoch, progress.stale_epochs = mae, epoch, 0
-            best = {k: v.detach().clone() for k, v in model.state_dict().items()}
-        else:
-            progress.stale_epochs += 1
+        if progress.finish_epoch(epoch, mae):
+            best = snapshot(model)
         bar.set_postfix(val_mae=f"{mae:.3f}", best=f"{progress.best_metric:.3f}")
         save_checkpoint(checkpoint, model, optimizer, schedule, run_config, progress, best, generator)
         if progress.stale_epochs >= settings.patience:

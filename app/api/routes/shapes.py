@@ -13,11 +13,11 @@ from fastapi import APIRouter, File, Form, Header, Path, Query, Request, Respons
 from pydantic import BaseModel, Field
 
 from app.api.deps import SettingsDep
-from app.api.operands import resolve_operands
+from app.api.operands import solve_upload
 from app.api.problems import ProblemError, problem_responses
-from app.api.routes.unions import FilesField, ScaleQuery, SpectraField, UnitsQuery
+from app.api.routes.unions import FilesField, ScaleQuery, SpectraField, UnitsQuery, union_of_operands
 from app.geometry.io import resolve_file_type
-from app.geometry.pipeline import SpectrumOptions, spectrum_from_bytes
+from app.geometry.pipeline import SpectrumOptions
 from app.retrieval.store import ShapeStore
 
 router = APIRouter(tags=["retrieval"])
@@ -72,12 +72,10 @@ async def retrieve(
     top: Annotated[int, Query(ge=1, le=MAX_TOP, description="Number of matches.")] = 10,
 ) -> RetrieveResponse:
     """The stored complete shapes nearest to the union of the operands."""
-    models = request.app.state.models
-    operands, _ = await resolve_operands(request, settings, files, spectra, models.k, units, scale, 1)
-    union = await anyio.to_thread.run_sync(models.union, [np.asarray(o.eigenvalues) for o in operands])
-    matches = await anyio.to_thread.run_sync(_store(request).nearest, union.eigenvalues, top)
+    outcome = await union_of_operands(request, settings, files, spectra, units, scale)
+    matches = await anyio.to_thread.run_sync(_store(request).nearest, outcome.result.eigenvalues, top)
     return RetrieveResponse(
-        query=union.eigenvalues.tolist(),
+        query=outcome.result.eigenvalues.tolist(),
         matches=[MatchOut(id=m.record.id, label=m.record.label, distance=m.distance) for m in matches],
     )
 
@@ -101,14 +99,7 @@ async def add_shape(
         max_vertices=settings.max_vertices,
         max_hole_edges=settings.max_hole_edges,
     )
-    data = await file.read()
-    report = await anyio.to_thread.run_sync(
-        spectrum_from_bytes,
-        data,
-        resolve_file_type(file.filename, None),
-        options,
-        limiter=request.app.state.solver_limiter,
-    )
+    report = await solve_upload(request, await file.read(), resolve_file_type(file.filename, None), options)
     record = await anyio.to_thread.run_sync(
         _store(request).add, label, np.asarray(report.eigenvalues), file.filename or "upload"
     )

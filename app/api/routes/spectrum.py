@@ -3,15 +3,14 @@
 import json
 from typing import Annotated, Literal
 
-import anyio
 from fastapi import APIRouter, File, Form, Query, Request, UploadFile
 
 from app.api.deps import SettingsDep
-from app.api.metrics import SOLVES
+from app.api.operands import solve_upload
 from app.api.problems import problem_responses
 from app.geometry.errors import InvalidGeometry
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
-from app.geometry.pipeline import SpectrumOptions, SpectrumReport, spectrum_from_bytes
+from app.geometry.pipeline import SpectrumOptions, SpectrumReport
 from app.geometry.spectrum import DEFAULT_K, MAX_K
 
 router = APIRouter(tags=["spectra"])
@@ -45,15 +44,7 @@ async def spectrum(
         max_vertices=settings.max_vertices,
         max_hole_edges=settings.max_hole_edges,
     )
-    report = await anyio.to_thread.run_sync(
-        spectrum_from_bytes,
-        data,
-        resolved_type,
-        options,
-        limiter=request.app.state.solver_limiter,
-    )
-    SOLVES.observe((report.assembly_ms + report.solve_ms) / 1e3)
-    return report
+    return await solve_upload(request, data, resolved_type, options)
 
 
 def _parse_indices(text: str | None) -> list[int] | None:

@@ -5,6 +5,7 @@ more than two operands is folded left to right, exactly as the operator was trai
 """
 
 import time
+from dataclasses import dataclass
 from typing import Annotated, Literal
 
 import anyio
@@ -16,6 +17,7 @@ from app.api.deps import SettingsDep
 from app.api.metrics import INFERENCE
 from app.api.operands import Operand, resolve_operands
 from app.api.problems import problem_responses
+from app.core.config import Settings
 from app.inference.models import INTERVAL_Z, SpectralModels, Union
 from app.inference.template import PART_NAMES, coloured_template
 
@@ -68,27 +70,46 @@ def _models(request: Request) -> SpectralModels:
     return request.app.state.models
 
 
-async def _union(request: Request, operands: list[Operand]) -> tuple[Union, float]:
+@dataclass(frozen=True)
+class UnionOutcome:
+    """The operands of a request, their union and what each step cost."""
+
+    operands: list[Operand]
+    result: Union
+    solve_ms: float
+    inference_ms: float
+
+    def fields(self, models: SpectralModels) -> dict:
+        """The response fields every union-based endpoint shares."""
+        return {
+            "eigenvalues": self.result.eigenvalues.tolist(),
+            "sigma": self.result.sigma.tolist(),
+            "lower": self.result.lower.tolist(),
+            "upper": self.result.upper.tolist(),
+            "operands": [OperandSpectrum(source=o.source, eigenvalues=o.eigenvalues) for o in self.operands],
+            "model_version": models.version,
+            "solve_ms": round(self.solve_ms, 2),
+            "inference_ms": round(self.inference_ms, 2),
+        }
+
+
+async def union_of_operands(
+    request: Request,
+    settings: Settings,
+    files: list[UploadFile] | None,
+    spectra: str | None,
+    units: Literal["m", "cm", "mm"],
+    scale: float | None,
+) -> UnionOutcome:
+    """Resolve the operands (solving uploaded files) and fold them through the union operator."""
     models = _models(request)
+    operands, solve_ms = await resolve_operands(request, settings, files, spectra, models.k, units, scale)
     started = time.perf_counter()
-    spectra = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
-    result = await anyio.to_thread.run_sync(models.union, spectra)
+    values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
+    result = await anyio.to_thread.run_sync(models.union, values)
     seconds = time.perf_counter() - started
     INFERENCE.labels("union").observe(seconds)
-    return result, seconds * 1e3
-
-
-def _union_fields(models: SpectralModels, operands: list[Operand], result: Union, solve_ms: float, ms: float) -> dict:
-    return {
-        "eigenvalues": result.eigenvalues.tolist(),
-        "sigma": result.sigma.tolist(),
-        "lower": result.lower.tolist(),
-        "upper": result.upper.tolist(),
-        "operands": [OperandSpectrum(source=o.source, eigenvalues=o.eigenvalues) for o in operands],
-        "model_version": models.version,
-        "solve_ms": round(solve_ms, 2),
-        "inference_ms": round(ms, 2),
-    }
+    return UnionOutcome(operands, result, solve_ms, seconds * 1e3)
 
 
 @router.post("/union", response_model=UnionResponse, responses=problem_responses(413, 415, 422))
@@ -105,10 +126,8 @@ async def union(
     Two or more operands fold left to right, ((A ∪ B) ∪ C) ∪ …; one operand is returned as is
     (σ = 0). The result is exactly the same whichever order two operands come in.
     """
-    models = _models(request)
-    operands, solve_ms = await resolve_operands(request, settings, files, spectra, models.k, units, scale, 1)
-    result, ms = await _union(request, operands)
-    return UnionResponse(**_union_fields(models, operands, result, solve_ms, ms))
+    outcome = await union_of_operands(request, settings, files, spectra, units, scale)
+    return UnionResponse(**outcome.fields(_models(request)))
 
 
 @router.post(
@@ -129,10 +148,9 @@ async def localize(
 ) -> LocalizeResponse | Response:
     """Where on the template body the union of the operands lies, and how much of each part it covers."""
     models = _models(request)
-    operands, solve_ms = await resolve_operands(request, settings, files, spectra, models.k, units, scale, 1)
-    result, ms = await _union(request, operands)
+    outcome = await union_of_operands(request, settings, files, spectra, units, scale)
     started = time.perf_counter()
-    region = await anyio.to_thread.run_sync(models.localize, result.eigenvalues)
+    region = await anyio.to_thread.run_sync(models.localize, outcome.result.eigenvalues)
     INFERENCE.labels("localizer").observe(time.perf_counter() - started)
     if format == "ply":
         ply = await anyio.to_thread.run_sync(coloured_template, models.template, region.vertices)
@@ -140,7 +158,7 @@ async def localize(
             ply, media_type="application/ply", headers={"content-disposition": "inline; filename=region.ply"}
         )
     return LocalizeResponse(
-        **_union_fields(models, operands, result, solve_ms, ms),
+        **outcome.fields(models),
         vertices=region.vertices.tolist(),
         area_fraction=region.area_fraction,
         part_coverage=region.part_coverage,
