@@ -52,6 +52,13 @@ def parse_spectra(text: str | None, k: int) -> list[list[float]]:
     return checked
 
 
+def upload_options(settings: Settings, k: int, units: Literal["m", "cm", "mm"], scale: float | None) -> SpectrumOptions:
+    """Solve options for an uploaded shape under the service's caps."""
+    return SpectrumOptions(
+        k=k, units=units, scale=scale, max_vertices=settings.max_vertices, max_hole_edges=settings.max_hole_edges
+    )
+
+
 async def solve_upload(request: Request, data: bytes, file_type: str, options: SpectrumOptions) -> SpectrumReport:
     """One uploaded shape's spectrum, solved off the event loop within the service's solve slots."""
     report = await anyio.to_thread.run_sync(
@@ -76,9 +83,7 @@ async def resolve_operands(
     count = len(files) + len(given)
     if not 1 <= count <= MAX_OPERANDS:
         raise InvalidSpectrum(f"expected 1 to {MAX_OPERANDS} operands (files and spectra), got {count}")
-    options = SpectrumOptions(
-        k=k, units=units, scale=scale, max_vertices=settings.max_vertices, max_hole_edges=settings.max_hole_edges
-    )
+    options = upload_options(settings, k, units, scale)
     operands: list[Operand] = []
     started = time.perf_counter()
     for index, upload in enumerate(files):

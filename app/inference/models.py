@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 
-from app.geometry.topology import face_areas
+from app.geometry.laplacian import mesh_operators
 from app.inference.template import PART_NAMES, Template
 
 UNION_FILE, LOCALIZER_FILE = "union.onnx", "localizer.onnx"
@@ -65,7 +65,8 @@ class SpectralModels:
             raise ValueError(f"localizer predicts {vertex_count} vertices, template has {len(self.template.vertices)}")
         if self.localizer_session.get_inputs()[0].shape[1] != self.k:
             raise ValueError("union operator and localizer disagree on k")
-        self.vertex_area = _vertex_areas(self.template)
+        # The lumped mass of the spectrum code: the same area weights the models were scored with.
+        self.vertex_area = mesh_operators(self.template.vertices, self.template.faces).mass.diagonal()
         digest = hashlib.sha256((directory / UNION_FILE).read_bytes() + (directory / LOCALIZER_FILE).read_bytes())
         self.version = digest.hexdigest()[:12]  # content hash: two replicas agree iff they serve the same models
 
@@ -89,10 +90,3 @@ class SpectralModels:
             for index, name in enumerate(PART_NAMES)
         }
         return Region(np.flatnonzero(inside), float(area[inside].sum() / area.sum()), coverage)
-
-
-def _vertex_areas(template: Template) -> np.ndarray:
-    """Lumped (barycentric) vertex areas: a third of each incident triangle's area."""
-    area = np.zeros(len(template.vertices))
-    np.add.at(area, template.faces.ravel(), np.repeat(face_areas(template.vertices, template.faces) / 3, 3))
-    return area

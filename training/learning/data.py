@@ -7,10 +7,12 @@ the training rows (by a fixed seed) and unpacks masks on demand.
 
 import json
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
+from app.geometry.laplacian import mesh_operators
 from training.data.template import Template
 
 VALIDATION_FRACTION = 0.05
@@ -91,6 +93,15 @@ class SpectralData:
 
     def identity_of(self, shape: np.ndarray) -> np.ndarray:
         return shape // self.shapes_per_identity
+
+    @cached_property
+    def vertex_area(self) -> np.ndarray:
+        """Lumped (intrinsic-Delaunay) vertex areas of the template: the weight of every size measure."""
+        return mesh_operators(self.template.vertices, self.template.faces).mass.diagonal()
+
+    def mask_area(self, indices: np.ndarray) -> np.ndarray:
+        """Template area (m²) of each of the masks ``indices``."""
+        return self.masks(indices) @ self.vertex_area
 
     def masks(self, indices: np.ndarray) -> np.ndarray:
         """(len(indices), n) boolean template masks."""

@@ -15,7 +15,7 @@ from training.learning.baselines import UnionLookup, elementwise_min, larger_par
 from training.learning.data import PairTable, SpectralData
 from training.learning.localizer_net import Localizer
 from training.learning.masks import symmetric_scores
-from training.learning.train_localizer import localize, template_basis
+from training.learning.train_localizer import localize
 from training.learning.train_union import INTERVAL_Z, predict
 from training.learning.union_net import UnionOperator
 
@@ -99,22 +99,18 @@ class Evaluator:
         pairs = self.data.pairs
         train = pairs.rows(np.flatnonzero(pairs.split == "train"))
         self.lookup = UnionLookup(train.a, train.b, train.union)
-        _, self.areas = template_basis(self.data, 1)
-
-    def area(self, mask_ids: np.ndarray) -> np.ndarray:
-        return self.data.masks(mask_ids) @ self.areas
-
-    def union_methods(self, rows: PairTable) -> dict[str, np.ndarray]:
-        return {
-            "operator": predict(self.union, rows.a, rows.b)[0],
-            "elementwise_min": elementwise_min(rows.a, rows.b),
-            "larger_part": larger_part(rows.a, rows.b, self.area(rows.mask_a), self.area(rows.mask_b)),
-            "lookup": self.lookup.predict(rows.a, rows.b),
-        }
+        self.areas = self.data.vertex_area
 
     def row(self, rows: PairTable) -> dict:
-        methods = self.union_methods(rows)
         mean, sigma = predict(self.union, rows.a, rows.b)
+        methods = {
+            "operator": mean,
+            "elementwise_min": elementwise_min(rows.a, rows.b),
+            "larger_part": larger_part(
+                rows.a, rows.b, self.data.mask_area(rows.mask_a), self.data.mask_area(rows.mask_b)
+            ),
+            "lookup": self.lookup.predict(rows.a, rows.b),
+        }
         out: dict = {"rows": len(rows), "union": {name: spectral_errors(p, rows.union) for name, p in methods.items()}}
         out["interval_coverage"] = float(np.mean(np.abs(mean - rows.union) <= INTERVAL_Z * sigma))
         truth = self.data.masks(rows.mask_union)

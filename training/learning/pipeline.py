@@ -21,7 +21,7 @@ from training.learning.evaluate import evaluate
 from training.learning.export import export_localizer, export_union, localizer_parity, union_parity
 from training.learning.localizer_net import Localizer, LocalizerConfig
 from training.learning.shapedna import complete_shapes, retrieval_table, save_seed
-from training.learning.train_localizer import LocalizerTraining, template_basis, train_localizer
+from training.learning.train_localizer import LocalizerTraining, train_localizer
 from training.learning.train_union import UnionTraining, predict, train_union
 
 UNION_FILE, LOCALIZER_FILE = "union.onnx", "localizer.onnx"
@@ -95,8 +95,7 @@ def retrieval_queries(data: SpectralData, union) -> dict[str, tuple[np.ndarray, 
     rows = pairs.rows(
         np.flatnonzero((pairs.split != "train") & (pairs.split != "validation") & (pairs.scenario == "full"))
     )
-    _, vertex_area = template_basis(data, 1)
-    areas = data.masks(rows.mask_a) @ vertex_area, data.masks(rows.mask_b) @ vertex_area
+    areas = data.mask_area(rows.mask_a), data.mask_area(rows.mask_b)
     return {
         "operator_union": (predict(union, rows.a, rows.b)[0], rows.shape_a),
         "elementwise_min": (elementwise_min(rows.a, rows.b), rows.shape_a),

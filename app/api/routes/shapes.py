@@ -13,11 +13,10 @@ from fastapi import APIRouter, File, Form, Header, Path, Query, Request, Respons
 from pydantic import BaseModel, Field
 
 from app.api.deps import SettingsDep
-from app.api.operands import solve_upload
+from app.api.operands import solve_upload, upload_options
 from app.api.problems import ProblemError, problem_responses
 from app.api.routes.unions import FilesField, ScaleQuery, SpectraField, UnitsQuery, union_of_operands
 from app.geometry.io import resolve_file_type
-from app.geometry.pipeline import SpectrumOptions
 from app.retrieval.store import ShapeStore
 
 router = APIRouter(tags=["retrieval"])
@@ -92,13 +91,7 @@ async def add_shape(
 ) -> ShapeOut:
     """Compute a complete shape's spectrum and store it under an identity label."""
     _require_key(settings, x_api_key)
-    options = SpectrumOptions(
-        k=request.app.state.models.k,
-        units=units,
-        scale=scale,
-        max_vertices=settings.max_vertices,
-        max_hole_edges=settings.max_hole_edges,
-    )
+    options = upload_options(settings, request.app.state.models.k, units, scale)
     report = await solve_upload(request, await file.read(), resolve_file_type(file.filename, None), options)
     record = await anyio.to_thread.run_sync(
         _store(request).add, label, np.asarray(report.eigenvalues), file.filename or "upload"
