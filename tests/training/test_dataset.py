@@ -96,10 +96,18 @@ def test_splits_keep_held_out_identities_and_poses_out_of_training(data, built):
 def test_test_b_unions_were_never_seen_in_training(data, sampler):
     n = len(sampler.template.vertices)
     train = (data["split"] == "train") & (data["scenario"] == "partial")
-    seen = np.array([unpack(data, i) for i in data["mask_union"][train]]).reshape(-1, n)
+    seen_masks = np.concatenate([data["mask_union"][train], data["triples"][:, 5:].ravel()])
+    seen = np.array([unpack(data, i) for i in seen_masks]).reshape(-1, n)
     test_b = np.array([unpack(data, i) for i in data["mask_union"][data["split"] == "test_b"]])
     assert len(test_b) > 0
     assert np.all(symmetric_iou(test_b, seen, sampler.vertex_area, sampler.template.mirror) < TEST_B_MAX_IOU)
+
+
+def test_every_test_group_gets_its_test_b_rows(data):
+    test_b = (data["split"] == "test_b") & (data["variant"] == "mesh")
+    groups, counts = np.unique(data["group"][test_b], return_counts=True)
+    assert set(groups) == {"known_man", "known_woman", "unknown_man", "unknown_woman", "child"}
+    assert np.all(counts == PRESET.test_pairs)
 
 
 def test_a_union_has_no_larger_eigenvalue_than_its_parts(data):

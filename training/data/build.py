@@ -8,6 +8,7 @@ functions run on a local process pool or, given a scheduler address, on a Dask c
 Everything is a function of the preset and one seed.
 """
 
+import hashlib
 import json
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -20,13 +21,23 @@ from typing import Protocol
 import numpy as np
 from tqdm import tqdm
 
-from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION, sample_pair, sample_triple, symmetric_iou
+from training.data.pairs import (
+    FULL_COVERAGE,
+    PARTIAL_UNION,
+    Pair,
+    sample_pair,
+    sample_triple,
+    split_union,
+    symmetric_iou,
+)
 from training.data.regions import RegionSampler
 from training.data.samples import export_samples
 from training.data.spectra import CLOUD, MESH, REMESHED, VARIANTS, task_spectrum
 from training.data.template import Template
 
 TEST_B_MAX_IOU = 0.8  # a Test B union overlaps every training union (or its mirror) less than this
+TEST_B_TYPES = 30  # held-out union types, each realized by many different pairs
+SPLIT_ATTEMPTS = 20  # tries per wanted Test B pair
 
 
 @dataclass(frozen=True)
@@ -253,7 +264,7 @@ def _stage_masks(
     test_groups = 5
     plan = {
         "pair": preset.train_pairs + test_groups * preset.test_pairs,
-        "candidate": test_groups * preset.test_pairs * 4,  # Test B keeps the novel ones
+        "candidate": test_groups * preset.test_pairs * 4,  # Test B picks its union types here
         "triple": preset.triples,
     }
     results: dict[str, dict[str, np.ndarray]] = {}
@@ -280,7 +291,7 @@ def _stage_masks(
 def _stage_splits(
     preset: Preset, identities: list[dict], pairs: dict, triples: dict, sampler: RegionSampler, seed: int
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """Assign pairs to shapes and splits; keep Test B candidates whose union is novel."""
+    """Assign pairs to shapes and splits; Test B realizes held-out union types with new pairs."""
     rng = np.random.default_rng([seed, 2])
     template = sampler.template
     n = len(template.vertices)
@@ -294,11 +305,11 @@ def _stage_splits(
         masks.append(packed)
         return len(masks) - 1
 
-    def add(split: str, group: str, scenario: str, packed: np.ndarray) -> None:
-        identity = int(rng.choice([i for i, m in enumerate(identities) if m["group"] == group]))
+    def add(split: str, group: str, scenario: str, packed: np.ndarray, draw: np.random.Generator = rng) -> None:
+        identity = int(draw.choice([i for i, m in enumerate(identities) if m["group"] == group]))
         pose_pool = _poses_for(split, group, preset)
-        pose_a = int(rng.choice(pose_pool))
-        pose_b = pose_a if rng.random() < 0.5 else int(rng.choice(pose_pool))
+        pose_a = int(draw.choice(pose_pool))
+        pose_b = pose_a if draw.random() < 0.5 else int(draw.choice(pose_pool))
         a, b = add_mask(packed[0]), add_mask(packed[1])
         union = 0 if scenario == FULL_COVERAGE else add_mask(packed[2])
         for key, value in (
@@ -323,32 +334,53 @@ def _stage_splits(
         for j in range(preset.test_pairs):
             i = offset + g * preset.test_pairs + j
             add("test_a", group, str(pair_scenarios[i]), pair_masks[i])
-    train_unions = np.array(
-        [
-            np.unpackbits(pair_masks[i][2], count=n)
-            for i in range(preset.train_pairs)
-            if pair_scenarios[i] == PARTIAL_UNION
-        ],
-        dtype=bool,
-    ).reshape(-1, n)
-    candidates = pairs["candidate"]["masks"]
-    novelty = symmetric_iou(
-        np.unpackbits(candidates[:, 2], axis=-1, count=n).astype(bool),
-        train_unions,
-        sampler.vertex_area,
-        template.mirror,
+    seen = np.concatenate(
+        [pair_masks[: preset.train_pairs][pair_scenarios[: preset.train_pairs] == PARTIAL_UNION, 2]]
+        + [triples["masks"][:, column] for column in (3, 4)]
     )
-    novel = iter(np.flatnonzero(novelty < TEST_B_MAX_IOU))
+    held_out = _held_out_unions(_unpack(pairs["candidate"]["masks"][:, 2], n), _unpack(seen, n), sampler)
+    test_b_rng = np.random.default_rng([seed, 3])  # Test B draws leave every other row as it was
     for group in test_groups:
-        for _ in range(preset.test_pairs):
-            i = next(novel, None)
-            if i is None:
-                break
-            add("test_b", group, PARTIAL_UNION, candidates[i])
+        for pair in _realizations(sampler, held_out, preset.test_pairs, test_b_rng):
+            add("test_b", group, PARTIAL_UNION, np.packbits([pair.a, pair.b, pair.union], axis=-1), test_b_rng)
     table = {key: np.array(value) for key, value in rows.items()}
     table = _with_variants(table, preset, rng)
     table["triples"] = _triple_rows(triples, preset, identities, rng, add_mask)
     return table, np.array(masks)
+
+
+def _unpack(packed: np.ndarray, n: int) -> np.ndarray:
+    return np.unpackbits(packed, axis=-1, count=n).astype(bool).reshape(-1, n)
+
+
+def _held_out_unions(candidates: np.ndarray, seen: np.ndarray, sampler: RegionSampler) -> list[np.ndarray]:
+    """Union types for Test B: candidate unions unlike every seen union and unlike each other.
+
+    "Unlike" is a symmetric IoU below ``TEST_B_MAX_IOU``. Training draws tens of thousands of
+    fresh unions, which leaves few such candidates: the paper's Test B likewise has a handful
+    of union types, each met in many poses, identities and part pairs.
+    """
+    weights, mirror = sampler.vertex_area, sampler.template.mirror
+    novelty = symmetric_iou(candidates, seen, weights, mirror)
+    chosen: list[np.ndarray] = []
+    for i in np.flatnonzero(novelty < TEST_B_MAX_IOU):
+        if len(chosen) == TEST_B_TYPES:
+            break
+        if not chosen or symmetric_iou(candidates[i : i + 1], np.array(chosen), weights, mirror)[0] < TEST_B_MAX_IOU:
+            chosen.append(candidates[i])
+    return chosen
+
+
+def _realizations(sampler: RegionSampler, unions: list[np.ndarray], count: int, rng: np.random.Generator) -> list[Pair]:
+    """Up to ``count`` pairs, cycling through ``unions``; a union that resists splitting gets fewer."""
+    pairs: list[Pair] = []
+    for attempt in range(count * SPLIT_ATTEMPTS if unions else 0):
+        if len(pairs) == count:
+            break
+        pair = split_union(sampler, unions[attempt % len(unions)], rng)
+        if pair is not None:
+            pairs.append(pair)
+    return pairs
 
 
 def _poses_for(split: str, group: str, preset: Preset) -> range:
@@ -421,18 +453,42 @@ def _stage_spectra(
     workers: int | None,
 ) -> dict[str, np.ndarray]:
     tasks, variants, cell_task = _spectrum_tasks(table)
-    chunks = list(_chunks(range(len(tasks)), preset.chunk))
-    missing = [i for i in range(len(chunks)) if not layout.chunk("spectra", i).exists()]
+    keys = _task_keys(tasks, variants, np.load(masks_path, mmap_mode="r"))
+    cached = _cached_spectra(layout)
+    todo = np.flatnonzero([key not in cached for key in keys])
+    chunks = list(_chunks(todo, preset.chunk))
+    first = 1 + max((int(path.stem.split("-")[1]) for path in layout.work.glob("spectra-*.npz")), default=-1)
 
     def save(index: int, values: np.ndarray) -> None:
-        np.savez(layout.chunk("spectra", missing[index]), values=values)
+        np.savez(layout.chunk("spectra", first + index), keys=keys[chunks[index]], values=values)
+        cached.update(zip(keys[chunks[index]], values, strict=True))
 
-    arguments = [
-        (template_dir, shapes_path, masks_path, tasks[chunks[i], :2], variants[chunks[i]], preset.k) for i in missing
-    ]
+    arguments = [(template_dir, shapes_path, masks_path, tasks[c, :2], variants[c], preset.k) for c in chunks]
     run_tasks(solve_chunk, arguments, save, scheduler, workers, "spectra")
-    values = np.concatenate([np.load(layout.chunk("spectra", i))["values"] for i in range(len(chunks))])
+    values = np.array([cached[key] for key in keys]).reshape(len(keys), preset.k)
     return {"values": values, "shape": tasks[:, 0], "mask": tasks[:, 1], "variant": variants, "cell_task": cell_task}
+
+
+def _task_keys(tasks: np.ndarray, variants: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    """A content key per (shape, mask, variant) task.
+
+    Spectra are cached by what they are the spectrum of, not by their place in the task list,
+    so a build whose splits changed still reuses every spectrum it computed before.
+    """
+    keys = [
+        hashlib.blake2b(np.int64(shape).tobytes() + masks[mask].tobytes() + str(variant).encode(), digest_size=16)
+        .digest()
+        for (shape, mask, _), variant in zip(tasks, variants, strict=True)
+    ]
+    return np.array(keys, dtype="S16")
+
+
+def _cached_spectra(layout: Layout) -> dict[bytes, np.ndarray]:
+    cached: dict[bytes, np.ndarray] = {}
+    for path in sorted(layout.work.glob("spectra-*.npz")):
+        with np.load(path) as chunk:
+            cached.update(zip(chunk["keys"], chunk["values"], strict=True))
+    return cached
 
 
 def _chunks(items: Iterable[int], size: int) -> Iterable[np.ndarray]:

@@ -100,6 +100,26 @@ def sample_triple(sampler: RegionSampler, rng: np.random.Generator) -> tuple[Pai
             return first, second
 
 
+def split_union(sampler: RegionSampler, union: np.ndarray, rng: np.random.Generator) -> Pair | None:
+    """Two overlapping parts whose union is exactly ``union`` (or its mirror image), or None.
+
+    A random low-frequency field is cut at two levels: A keeps the low side, B the high side,
+    and the band between them is where they overlap. This is how Test B realizes one held-out
+    union type many times, by parts that differ from row to row.
+    """
+    count = int(rng.integers(1, 10))
+    field = sampler.basis[:, 1 : count + 1] @ rng.standard_normal(count)
+    low = rng.uniform(0.2, 0.6)
+    levels = np.quantile(field[union], [low, low + rng.uniform(0.1, 0.3)])
+    a = sampler.clean(union & (field <= levels[1]))
+    b = sampler.clean(union & (field >= levels[0]))
+    if a is None or b is None or not np.array_equal(a | b, union):
+        return None
+    pair = resolve_symmetry(sampler, a, b)
+    same = np.array_equal(pair.union, union) or np.array_equal(pair.union, union[sampler.template.mirror])
+    return pair if same and pair.scenario == PARTIAL_UNION and adds_to_both(sampler, pair) else None
+
+
 def symmetric_iou(masks: np.ndarray, others: np.ndarray, weights: np.ndarray, mirror: np.ndarray) -> np.ndarray:
     """(len(masks),) largest area-weighted IoU of each mask with any of ``others`` or their mirrors."""
     if len(others) == 0:
