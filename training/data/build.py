@@ -476,8 +476,9 @@ def _task_keys(tasks: np.ndarray, variants: np.ndarray, masks: np.ndarray) -> np
     so a build whose splits changed still reuses every spectrum it computed before.
     """
     keys = [
-        hashlib.blake2b(np.int64(shape).tobytes() + masks[mask].tobytes() + str(variant).encode(), digest_size=16)
-        .digest()
+        hashlib.blake2b(
+            np.int64(shape).tobytes() + masks[mask].tobytes() + str(variant).encode(), digest_size=16
+        ).digest()
         for (shape, mask, _), variant in zip(tasks, variants, strict=True)
     ]
     return np.array(keys, dtype="S16")
