@@ -58,11 +58,13 @@ class Preset:
     cloud_parts: int
     chunk: int
     k: int = 20
+    retrieval_pairs: int = 0  # full-coverage pairs on held-out poses and identities: identity queries only
 
 
 PRESETS = {
     "tiny": Preset(
-        "tiny", 2, 1, 1, 1, 1, poses=3, test_poses=1, train_pairs=24, test_pairs=2, triples=4, cloud_parts=2, chunk=8
+        "tiny", 2, 1, 1, 1, 1, poses=3, test_poses=1, train_pairs=24, test_pairs=2, triples=4, cloud_parts=2, chunk=8,
+        retrieval_pairs=5,
     ),
     "standard": Preset(
         "standard",
@@ -78,6 +80,7 @@ PRESETS = {
         triples=1_000,
         cloud_parts=100,
         chunk=64,
+        retrieval_pairs=4_000,
     ),
     "large": Preset(
         "large",
@@ -93,6 +96,7 @@ PRESETS = {
         triples=5_000,
         cloud_parts=500,
         chunk=128,
+        retrieval_pairs=10_000,
     ),
 }
 
@@ -156,7 +160,7 @@ def _mapped(path: str) -> np.ndarray:
 def draw_masks(template_dir: str, seed: int, chunk: int, kind: str, count: int) -> dict[str, np.ndarray]:
     """``count`` pairs (alternating scenarios) or triples, packed, from seed (seed, chunk)."""
     sampler = _sampler(template_dir)
-    rng = np.random.default_rng([seed, chunk, 0 if kind == "pair" else 1])
+    rng = np.random.default_rng([seed, chunk, {"pair": 0, "candidate": 1, "triple": 1, "retrieval": 2}[kind]])
     rows: list[list[np.ndarray]] = []
     scenarios = []
     for i in range(count):
@@ -165,7 +169,11 @@ def draw_masks(template_dir: str, seed: int, chunk: int, kind: str, count: int) 
             rows.append([first.a, first.b, second.b, first.union, second.union])
             scenarios.append(PARTIAL_UNION)
         else:
-            scenario = (FULL_COVERAGE, PARTIAL_UNION)[(chunk + i) % 2] if kind == "pair" else PARTIAL_UNION
+            scenario = {
+                "pair": (FULL_COVERAGE, PARTIAL_UNION)[(chunk + i) % 2],
+                "candidate": PARTIAL_UNION,
+                "retrieval": FULL_COVERAGE,
+            }[kind]
             pair = sample_pair(sampler, rng, scenario)
             rows.append([pair.a, pair.b, pair.union])
             scenarios.append(scenario)
@@ -266,6 +274,7 @@ def _stage_masks(
         "pair": preset.train_pairs + test_groups * preset.test_pairs,
         "candidate": test_groups * preset.test_pairs * 4,  # Test B picks its union types here
         "triple": preset.triples,
+        "retrieval": preset.retrieval_pairs,
     }
     results: dict[str, dict[str, np.ndarray]] = {}
     for kind, total in plan.items():
@@ -285,7 +294,7 @@ def _stage_masks(
         )
         parts = [np.load(layout.chunk(kind, i)) for i in range(len(counts))]
         results[kind] = {key: np.concatenate([p[key] for p in parts]) for key in ("masks", "scenario")}
-    return {"pair": results["pair"], "candidate": results["candidate"]}, results["triple"]
+    return {kind: results[kind] for kind in ("pair", "candidate", "retrieval")}, results["triple"]
 
 
 def _stage_splits(
@@ -346,6 +355,13 @@ def _stage_splits(
     table = {key: np.array(value) for key, value in rows.items()}
     table = _with_variants(table, preset, rng)
     table["triples"] = _triple_rows(triples, preset, identities, rng, add_mask)
+    # Appended last, from their own stream: the rows above stay as they were without them.
+    rows = {key: [] for key in rows}
+    retrieval_rng = np.random.default_rng([seed, 4])
+    for i, packed in enumerate(pairs["retrieval"]["masks"]):
+        add("retrieval", test_groups[i % len(test_groups)], FULL_COVERAGE, packed, retrieval_rng)
+    if rows["split"]:
+        table.update({key: np.concatenate([table[key], np.array(values)]) for key, values in rows.items()})
     return table, np.array(masks)
 
 

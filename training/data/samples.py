@@ -83,7 +83,7 @@ def _stored(data: dict, shape: int, mask: int, variant: str) -> list[float] | No
 
 def _sample_rows(data: dict, per_group: int) -> list[int]:
     rows = []
-    test = (data["split"] != "train") & (data["variant"] == MESH)
+    test = np.isin(data["split"], ["test_a", "test_b"]) & (data["variant"] == MESH)
     for group in np.unique(data["group"][test]):
         rows.extend(np.flatnonzero(test & (data["group"] == group))[:per_group].tolist())
     return rows

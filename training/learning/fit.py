@@ -5,7 +5,7 @@ weights) so that it loads without this package's classes and a killed run resume
 """
 
 import random
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -41,10 +41,12 @@ class Progress:
     best_metric: float = float("inf")  # lower is better
     best_epoch: int = -1
     stale_epochs: int = 0
+    history: list[float] = field(default_factory=list)  # the validation metric of every epoch
 
     def finish_epoch(self, epoch: int, metric: float) -> bool:
         """Record a finished epoch's validation metric; True when it is the best so far."""
         self.epoch = epoch + 1
+        self.history.append(metric)
         if metric < self.best_metric:
             self.best_metric, self.best_epoch, self.stale_epochs = metric, epoch, 0
             return True
@@ -77,6 +79,7 @@ def save_checkpoint(
         "best_metric": progress.best_metric,
         "best_epoch": progress.best_epoch,
         "stale_epochs": progress.stale_epochs,
+        "history": progress.history,
         "best_weights": best_weights,
         "torch_rng": torch.get_rng_state(),
         "generator": generator.get_state(),
@@ -100,7 +103,9 @@ def load_checkpoint(
     schedule.load_state_dict(state["schedule"])
     torch.set_rng_state(state["torch_rng"])
     generator.set_state(state["generator"])
-    progress = Progress(state["epoch"], state["best_metric"], state["best_epoch"], state["stale_epochs"])
+    progress = Progress(
+        state["epoch"], state["best_metric"], state["best_epoch"], state["stale_epochs"], list(state["history"])
+    )
     return progress, state["best_weights"]
 
 
