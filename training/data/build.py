@@ -63,7 +63,19 @@ class Preset:
 
 PRESETS = {
     "tiny": Preset(
-        "tiny", 2, 1, 1, 1, 1, poses=3, test_poses=1, train_pairs=24, test_pairs=2, triples=4, cloud_parts=2, chunk=8,
+        "tiny",
+        2,
+        1,
+        1,
+        1,
+        1,
+        poses=3,
+        test_poses=1,
+        train_pairs=24,
+        test_pairs=2,
+        triples=4,
+        cloud_parts=2,
+        chunk=8,
         retrieval_pairs=5,
     ),
     "standard": Preset(

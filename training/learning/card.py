@@ -103,6 +103,9 @@ def render(metrics: dict, command: str) -> str:
         "",
         *extra_table(metrics),
         "",
+        "Union operator, validation mae per epoch: "
+        + ", ".join(f"{m:.2f}" for m in metrics.get("union_validation_mae", [])),
+        "",
         "### Identity retrieval (Table 4)",
         "Queries: the full-coverage test pairs (every group and variant); database: every complete posed body",
         "of the benchmark except the query's own shape (ShapeDNA: each complete shape against the others).",

@@ -89,6 +89,11 @@ def save_checkpoint(
     temporary.replace(path)  # a kill mid-write never leaves a truncated checkpoint
 
 
+def validation_history(path: Path) -> list[float]:
+    """The validation metric of every epoch of the run checkpointed at ``path``."""
+    return list(torch.load(path, map_location="cpu", weights_only=False)["history"])
+
+
 def load_checkpoint(
     path: Path,
     model: torch.nn.Module,
