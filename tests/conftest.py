@@ -6,6 +6,7 @@ import trimesh
 from scipy.spatial import Delaunay
 
 from app.geometry.shapes import Mesh
+from tests.postgres import postgres_url  # noqa: F401  (a session fixture shared by every folder)
 
 
 def disk(radius: float = 1.0, rings: int = 30) -> Mesh:

@@ -139,6 +139,8 @@ def test_models_describes_what_is_loaded(client, template):
     body = client.get("/v1/models").json()
     assert body["k"] == 20 and body["template_vertices"] == len(template.vertices)
     assert body["parts"] == list(PART_NAMES) and len(body["model_version"]) == 12
+    assert body["database"]["backend"] == "sqlite"
+    assert body["database"]["shapes"] == client.get("/v1/shapes").json()["total"] > 0
 
 
 def test_metrics_count_requests_by_endpoint(client, parts):

@@ -57,6 +57,11 @@ class LocalizeResponse(UnionResponse):
     template_vertices: int
 
 
+class DatabaseInfo(BaseModel):
+    backend: Literal["sqlite", "postgresql"]
+    shapes: int = Field(description="Complete shapes stored for retrieval.")
+
+
 class ModelsResponse(BaseModel):
     model_version: str
     k: int
@@ -64,6 +69,7 @@ class ModelsResponse(BaseModel):
     interval: str
     template_vertices: int
     parts: list[str]
+    database: DatabaseInfo
 
 
 def _models(request: Request) -> SpectralModels:
@@ -168,8 +174,9 @@ async def localize(
 
 @router.get("/models", response_model=ModelsResponse)
 async def models_info(request: Request) -> ModelsResponse:
-    """What is loaded: versions, k, units, the union interval's meaning, the template."""
-    models = _models(request)
+    """What is loaded: versions, k, units, the union interval's meaning, the template, the database."""
+    models, store = _models(request), request.app.state.store
+    shapes = await anyio.to_thread.run_sync(store.count)
     return ModelsResponse(
         model_version=models.version,
         k=models.k,
@@ -177,4 +184,5 @@ async def models_info(request: Request) -> ModelsResponse:
         interval=f"eigenvalues ± {INTERVAL_Z}·sigma holds 90 % of held-out eigenvalues",
         template_vertices=len(models.template.vertices),
         parts=list(PART_NAMES),
+        database=DatabaseInfo(backend=store.backend, shapes=shapes),
     )
