@@ -43,11 +43,36 @@ def status_for(error: GeometryError) -> int:
     return 415 if isinstance(error, UnsupportedFileType) else 422
 
 
-def problem_responses(*statuses: int) -> dict[int | str, dict]:
-    """OpenAPI ``responses=`` entries for the given statuses, all with the Problem body."""
-    return {
-        status: {"model": Problem, "content": {PROBLEM_MEDIA_TYPE: {}}, "description": "Problem"} for status in statuses
+# Representative problems per status for the OpenAPI page: (slug, title, detail).
+EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
+    401: [("invalid-api-key", "Invalid API key", "X-API-Key is missing or does not match.")],
+    403: [("writes-disabled", "Writes disabled", "No API key is configured, so /v1/shapes is read-only.")],
+    404: [("shape-not-found", "Shape not found", "No stored shape has id 3f2a….")],
+    413: [("upload-too-large", "Upload too large", "The request body exceeds 67108864 bytes.")],
+    415: [("unsupported-file-type", "Unsupported file type", "'.zip' is not an accepted type (ply, obj, …).")],
+    422: [
+        ("invalid-spectrum", "Invalid spectrum", "operand 2 (spectra[1]): eigenvalues must be non-decreasing."),
+        ("invalid-geometry", "Invalid geometry", "operand 1 (files[0], scan.ply): coordinates contain NaN or inf."),
+        ("invalid-request", "Invalid request", "query.top: Input should be less than or equal to 100"),
+    ],
+    503: [("not-ready", "Not ready", "The models or the database are not open yet.")],
+}
+
+
+def problem_responses(*statuses: int, slugs: set[str] | None = None) -> dict[int | str, dict]:
+    """OpenAPI ``responses=`` entries for the given statuses: the Problem body with examples
+    (those of ``slugs`` only, when a route can raise just some of them)."""
+    return {status: _documented(status, slugs) for status in statuses}
+
+
+def _documented(status: int, slugs: set[str] | None) -> dict:
+    examples = {
+        slug: {"summary": title, "value": {"type": f"/problems/{slug}", "title": title, "status": status, "detail": d}}
+        for slug, title, d in EXAMPLES.get(status, [])
+        if slugs is None or slug in slugs
     }
+    content = {PROBLEM_MEDIA_TYPE: {"schema": Problem.model_json_schema(), "examples": examples}}
+    return {"content": content, "description": "Problem"}
 
 
 def install_problem_handlers(app: FastAPI) -> None:

@@ -99,7 +99,7 @@ async def add_shape(
     return ShapeOut(**record.__dict__)
 
 
-@router.get("/shapes", response_model=ShapePage)
+@router.get("/shapes", response_model=ShapePage, responses=problem_responses(422, slugs={"invalid-request"}))
 async def list_shapes(
     request: Request,
     offset: Annotated[int, Query(ge=0)] = 0,
@@ -112,7 +112,13 @@ async def list_shapes(
     return ShapePage(total=total, offset=offset, shapes=[ShapeOut(**r.__dict__) for r in records])
 
 
-@router.delete("/shapes/{shape_id}", status_code=204, responses=problem_responses(401, 403, 404))
+@router.delete(
+    "/shapes/{shape_id}",
+    status_code=204,
+    responses=problem_responses(
+        401, 403, 404, 422, slugs={"invalid-api-key", "writes-disabled", "shape-not-found", "invalid-request"}
+    ),
+)
 async def delete_shape(
     request: Request,
     settings: SettingsDep,
