@@ -133,11 +133,16 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=30.0, help="per scenario")
     parser.add_argument("--concurrency", type=int, default=8)
     parser.add_argument("--repeats", type=int, default=7, help="for the single-request breakdown")
+    parser.add_argument("--write-parts", type=Path, help="only write the two parts (PLY) into this folder")
     args = parser.parse_args()
 
     settings = Settings()
     template = Template.load(settings.models_dir)
     parts = [template_part(template, ("head", "neck")), template_part(template, ("left_hand", "left_forearm"))]
+    if args.write_parts:
+        for name, data in zip(("no_head.ply", "no_left_arm.ply"), parts, strict=True):
+            (args.write_parts / name).write_bytes(data)
+        return
     sizes = [len(trimesh.load(trimesh.util.wrap_as_stream(p), file_type="ply").vertices) for p in parts]
     server = None if args.url else start_server(args.port)
     url = args.url or f"http://127.0.0.1:{args.port}"
