@@ -571,6 +571,7 @@ def _write(
         "rows": n_rows,
         "triples": n_triples,
         "distinct_masks": len(masks),
+        "test_b_union_types": len(np.unique(masks[table["mask_union"][table["split"] == "test_b"]], axis=0)),
         "spectra": len(spectra["values"]),
         "failed_spectra": failed,
         "counts": dict(sorted(counts.items())),
@@ -592,8 +593,10 @@ def _card(manifest: dict) -> str:
         f"{preset['children']} children) × {preset['poses']} poses = {manifest['shapes']} shapes",
         f"- pair rows: {manifest['rows']}; triples: {manifest['triples']}; "
         f"distinct masks: {manifest['distinct_masks']}",
+        f"- Test B: {manifest['test_b_union_types']} held-out union types, each realized by different part pairs",
         f"- spectra: {manifest['spectra']} (k = {preset['k']}), failed: {manifest['failed_spectra']}",
-        f"- size: {manifest['bytes'] / 1e6:.1f} MB (`dataset.npz`); build time: {manifest['build_seconds']} s",
+        f"- size: {manifest['bytes'] / 1e6:.1f} MB (`dataset.npz`); build time: {manifest['build_seconds']} s "
+        "(of this run: a resumed build reuses finished chunks and counts only its own work)",
         "",
         "| split/group/variant | rows |",
         "|---|---|",
