@@ -3,12 +3,12 @@
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
-import anyio
 from fastapi import FastAPI
 
 from app import __version__
 from app.api.metrics import MetricsMiddleware
 from app.api.metrics import router as metrics_router
+from app.api.operands import SolveSlots
 from app.api.problems import install_problem_handlers
 from app.api.routes import health, shapes, spectrum, unions
 from app.api.upload_limit import UploadLimitMiddleware
@@ -23,7 +23,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        app.state.solver_limiter = anyio.CapacityLimiter(settings.solver_concurrency)
+        app.state.solve_slots = SolveSlots(settings.solver_concurrency, settings.max_queued_solves)
         app.state.models = SpectralModels(settings.models_dir)  # a broken artefact fails start-up
         app.state.store = open_store(settings.database_path, settings.database_url, settings.models_dir)
         app.state.ready = True

@@ -27,8 +27,8 @@ class Problem(BaseModel):
 class ProblemError(HTTPException):
     """An HTTP error that already knows its problem slug and title."""
 
-    def __init__(self, status: int, slug: str, title: str, detail: str) -> None:
-        super().__init__(status_code=status, detail=detail)
+    def __init__(self, status: int, slug: str, title: str, detail: str, headers: dict[str, str] | None = None) -> None:
+        super().__init__(status_code=status, detail=detail, headers=headers)
         self.slug = slug
         self.title = title
 
@@ -55,7 +55,10 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
         ("invalid-geometry", "Invalid geometry", "operand 1 (files[0], scan.ply): coordinates contain NaN or inf."),
         ("invalid-request", "Invalid request", "query.top: Input should be less than or equal to 100"),
     ],
-    503: [("not-ready", "Not ready", "The models or the database are not open yet.")],
+    503: [
+        ("not-ready", "Not ready", "The models or the database are not open yet."),
+        ("overloaded", "Overloaded", "16 uploads are already waiting for a solve slot; retry after 1 s."),
+    ],
 }
 
 

@@ -37,6 +37,9 @@ class Settings(BaseSettings):
         gt=0,
         description="Eigen-solves running at once; more requests wait for a slot.",
     )
+    max_queued_solves: int = Field(
+        16, ge=0, description="Uploads that may wait for a solve slot; beyond them, 503 overloaded with Retry-After."
+    )
 
 
 @lru_cache

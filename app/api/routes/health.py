@@ -13,7 +13,7 @@ async def healthz() -> dict[str, str]:
     return {"status": "ok"}
 
 
-@router.get("/readyz", responses=problem_responses(503))
+@router.get("/readyz", responses=problem_responses(503, slugs={"not-ready"}))
 async def readyz(request: Request) -> dict[str, str]:
     """Everything the endpoints need is loaded; 503 while starting or shutting down."""
     if not getattr(request.app.state, "ready", False):

@@ -60,7 +60,7 @@ def _require_key(settings, given: str | None) -> None:
         raise ProblemError(401, "invalid-api-key", "Invalid API key", "X-API-Key is missing or wrong")
 
 
-@router.post("/retrieve", response_model=RetrieveResponse, responses=problem_responses(413, 415, 422))
+@router.post("/retrieve", response_model=RetrieveResponse, responses=problem_responses(413, 415, 422, 503))
 async def retrieve(
     request: Request,
     settings: SettingsDep,
@@ -79,7 +79,9 @@ async def retrieve(
     )
 
 
-@router.post("/shapes", response_model=ShapeOut, status_code=201, responses=problem_responses(401, 403, 413, 415, 422))
+@router.post(
+    "/shapes", response_model=ShapeOut, status_code=201, responses=problem_responses(401, 403, 413, 415, 422, 503)
+)
 async def add_shape(
     request: Request,
     settings: SettingsDep,

@@ -19,7 +19,7 @@ router = APIRouter(tags=["spectra"])
 @router.post(
     "/spectrum",
     response_model=SpectrumReport,
-    responses=problem_responses(413, 415, 422),
+    responses=problem_responses(413, 415, 422, 503),
 )
 async def spectrum(
     request: Request,

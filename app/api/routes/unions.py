@@ -118,7 +118,7 @@ async def union_of_operands(
     return UnionOutcome(operands, result, solve_ms, seconds * 1e3)
 
 
-@router.post("/union", response_model=UnionResponse, responses=problem_responses(413, 415, 422))
+@router.post("/union", response_model=UnionResponse, responses=problem_responses(413, 415, 422, 503))
 async def union(
     request: Request,
     settings: SettingsDep,
@@ -139,7 +139,7 @@ async def union(
 @router.post(
     "/localize",
     response_model=LocalizeResponse,
-    responses={**problem_responses(413, 415, 422), 200: {"content": {"application/ply": {}}}},
+    responses={**problem_responses(413, 415, 422, 503), 200: {"content": {"application/ply": {}}}},
 )
 async def localize(
     request: Request,
