@@ -3,6 +3,7 @@
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
+import anyio
 from fastapi import FastAPI
 
 from app import __version__
@@ -10,11 +11,10 @@ from app.api.metrics import MetricsMiddleware
 from app.api.metrics import router as metrics_router
 from app.api.operands import SolveSlots
 from app.api.problems import install_problem_handlers
+from app.api.resources import Resources
 from app.api.routes import health, shapes, spectrum, unions
 from app.api.upload_limit import UploadLimitMiddleware
 from app.core.config import Settings, get_settings
-from app.inference.models import SpectralModels
-from app.retrieval.seed import open_store
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -24,8 +24,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         app.state.solve_slots = SolveSlots(settings.solver_concurrency, settings.max_queued_solves)
-        app.state.models = SpectralModels(settings.models_dir)  # a broken artefact fails start-up
-        app.state.store = open_store(settings.database_path, settings.database_url, settings.models_dir)
+        resources = Resources(settings)
+        await anyio.to_thread.run_sync(resources.open)  # what fails is reported by /readyz, not fatal
+        app.state.resources = resources
         app.state.ready = True
         yield
         app.state.ready = False

@@ -11,6 +11,7 @@ from pydantic import BaseModel
 from starlette.exceptions import HTTPException
 
 from app.geometry.errors import GeometryError, UnsupportedFileType
+from app.retrieval.store import StoreUnavailable
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
 
@@ -56,7 +57,13 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
         ("invalid-request", "Invalid request", "query.top: Input should be less than or equal to 100"),
     ],
     503: [
-        ("not-ready", "Not ready", "The models or the database are not open yet."),
+        (
+            "not-ready",
+            "Not ready",
+            "models: ModelsCorrupt: localizer.onnx does not match its checksum in MANIFEST.json",
+        ),
+        ("models-unavailable", "Models unavailable", "ModelsCorrupt: union.onnx is missing from /srv/models"),
+        ("database-unavailable", "Database unavailable", "PostgreSQL: connection refused"),
         ("overloaded", "Overloaded", "16 uploads are already waiting for a solve slot; retry after 1 s."),
     ],
 }
@@ -89,6 +96,12 @@ def install_problem_handlers(app: FastAPI) -> None:
     async def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
         detail = "; ".join(f"{'.'.join(str(p) for p in err['loc'])}: {err['msg']}" for err in exc.errors())
         return problem_response(422, "invalid-request", "Invalid request", detail)
+
+    @app.exception_handler(StoreUnavailable)
+    async def _store(_: Request, exc: StoreUnavailable) -> JSONResponse:
+        response = problem_response(503, "database-unavailable", "Database unavailable", str(exc))
+        response.headers["Retry-After"] = "5"
+        return response
 
     @app.exception_handler(HTTPException)
     async def _http(_: Request, exc: HTTPException) -> JSONResponse:

@@ -1,8 +1,9 @@
 """The ONNX models the service runs: the union operator and the region localizer.
 
-Loaded once at start-up (onnxruntime, CPU, no torch). Input and output names, k and the
-template size are read from the graphs and checked against each other and the template, so a
-mismatched set of artefacts fails at start-up, not on the first request.
+Loaded once at start-up (onnxruntime, CPU, no torch), after their checksums are verified.
+Input and output names, k and the template size are read from the graphs and checked against
+each other and the template, so a mismatched set of artefacts is found at start-up, not on
+the first request.
 """
 
 import hashlib
@@ -13,6 +14,7 @@ import numpy as np
 import onnxruntime as ort
 
 from app.geometry.laplacian import mesh_operators
+from app.inference.manifest import verify_manifest
 from app.inference.template import PART_NAMES, Template
 
 UNION_FILE, LOCALIZER_FILE = "union.onnx", "localizer.onnx"
@@ -56,6 +58,7 @@ class SpectralModels:
     """Union operator, localizer and template from one models directory."""
 
     def __init__(self, directory: Path, threads: int = 1) -> None:
+        verify_manifest(directory)
         self.template = Template.load(directory)
         self.union_session = _session(directory / UNION_FILE, threads)
         self.localizer_session = _session(directory / LOCALIZER_FILE, threads)

@@ -16,7 +16,7 @@ import numpy as np
 import psycopg
 
 from app.retrieval.distance import features
-from app.retrieval.store import Match, ShapeRecord
+from app.retrieval.store import Match, ShapeRecord, StoreUnavailable
 
 SCHEMA = (
     "CREATE EXTENSION IF NOT EXISTS cube",
@@ -31,6 +31,7 @@ SCHEMA = (
     "CREATE INDEX IF NOT EXISTS shapes_features ON shapes USING gist (features)",
 )
 COLUMNS = "id, label, source, spectrum, created_at"
+CONNECT_TIMEOUT_SECONDS = 5
 
 
 class PostgresStore:
@@ -47,8 +48,15 @@ class PostgresStore:
 
     @contextmanager
     def _connect(self) -> Iterator[psycopg.Connection]:
-        with psycopg.connect(self.url, connect_timeout=10) as connection:  # commits on clean exit
-            yield connection
+        try:
+            with psycopg.connect(self.url, connect_timeout=CONNECT_TIMEOUT_SECONDS) as connection:  # commits on exit
+                yield connection
+        except psycopg.OperationalError as exc:  # server down, unreachable, restarting
+            raise StoreUnavailable(f"PostgreSQL: {exc}".strip()) from exc
+
+    def ping(self) -> None:
+        with self._connect() as connection:
+            connection.execute("SELECT 1")
 
     def add(self, label: str, spectrum: np.ndarray, source: str) -> ShapeRecord:
         record = ShapeRecord(

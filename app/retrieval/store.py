@@ -30,6 +30,10 @@ CREATE TABLE IF NOT EXISTS shapes (
 """
 
 
+class StoreUnavailable(Exception):
+    """The database cannot be reached or opened: the request is retryable (503), not wrong."""
+
+
 @dataclass(frozen=True)
 class ShapeRecord:
     id: str
@@ -56,6 +60,7 @@ class ShapeStore(Protocol):
     def page(self, offset: int, limit: int) -> list[ShapeRecord]: ...
     def delete(self, shape_id: str) -> bool: ...
     def nearest(self, spectrum: np.ndarray, top: int) -> list[Match]: ...
+    def ping(self) -> None: ...
 
 
 class SQLiteStore:
@@ -65,20 +70,32 @@ class SQLiteStore:
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise StoreUnavailable(f"cannot create {path.parent}: {exc}") from exc
         with self._connect() as connection:
             connection.execute("PRAGMA journal_mode=WAL")
             connection.execute(SCHEMA)
 
     @contextmanager
     def _connect(self) -> Iterator[sqlite3.Connection]:
-        connection = sqlite3.connect(self.path, timeout=30)
+        try:
+            connection = sqlite3.connect(self.path, timeout=30)
+        except sqlite3.OperationalError as exc:
+            raise StoreUnavailable(f"SQLite file {self.path}: {exc}") from exc
         try:
             connection.execute("PRAGMA synchronous=FULL")
             with connection:  # commits on success, rolls back on error
                 yield connection
+        except sqlite3.OperationalError as exc:  # locked past the timeout, disk full, file gone
+            raise StoreUnavailable(f"SQLite file {self.path}: {exc}") from exc
         finally:
             connection.close()
+
+    def ping(self) -> None:
+        with self._connect() as connection:
+            connection.execute("SELECT 1 FROM shapes LIMIT 1")
 
     def add(self, label: str, spectrum: np.ndarray, source: str) -> ShapeRecord:
         record = ShapeRecord(

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.inference.manifest import write_manifest
 from app.retrieval.seed import SEED_FILE
 from training.learning.baselines import elementwise_min, larger_part
 from training.learning.card import update_card
@@ -73,6 +74,7 @@ def run_pipeline(data_dir: Path, runs: Path, models: Path, preset: TrainingPrese
     models.mkdir(parents=True, exist_ok=True)
     export_union(union, models / UNION_FILE)
     export_localizer(localizers["all"], models / LOCALIZER_FILE)
+    write_manifest(models)
     real = data.pairs.rows(np.flatnonzero(data.pairs.split != "train"))
     parity = {
         "union": union_parity(union, models / UNION_FILE, real.a, real.b),

@@ -15,7 +15,10 @@ async def healthz() -> dict[str, str]:
 
 @router.get("/readyz", responses=problem_responses(503, slugs={"not-ready"}))
 async def readyz(request: Request) -> dict[str, str]:
-    """Everything the endpoints need is loaded; 503 while starting or shutting down."""
+    """Models loaded and verified, database reachable; 503 with the reasons otherwise."""
     if not getattr(request.app.state, "ready", False):
         raise ProblemError(503, "not-ready", "Not ready", "the service is starting or stopping")
+    problems = await request.app.state.resources.problems()
+    if problems:
+        raise ProblemError(503, "not-ready", "Not ready", "; ".join(problems))
     return {"status": "ready"}

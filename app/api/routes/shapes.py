@@ -48,8 +48,8 @@ class RetrieveResponse(BaseModel):
     matches: list[MatchOut]
 
 
-def _store(request: Request) -> ShapeStore:
-    return request.app.state.store
+async def _store(request: Request) -> ShapeStore:
+    return await request.app.state.resources.require_store()
 
 
 def _require_key(settings, given: str | None) -> None:
@@ -72,7 +72,7 @@ async def retrieve(
 ) -> RetrieveResponse:
     """The stored complete shapes nearest to the union of the operands."""
     outcome = await union_of_operands(request, settings, files, spectra, units, scale)
-    matches = await anyio.to_thread.run_sync(_store(request).nearest, outcome.result.eigenvalues, top)
+    matches = await anyio.to_thread.run_sync((await _store(request)).nearest, outcome.result.eigenvalues, top)
     return RetrieveResponse(
         query=outcome.result.eigenvalues.tolist(),
         matches=[MatchOut(id=m.record.id, label=m.record.label, distance=m.distance) for m in matches],
@@ -93,10 +93,10 @@ async def add_shape(
 ) -> ShapeOut:
     """Compute a complete shape's spectrum and store it under an identity label."""
     _require_key(settings, x_api_key)
-    options = upload_options(settings, request.app.state.models.k, units, scale)
+    options = upload_options(settings, request.app.state.resources.require_models().k, units, scale)
     report = await solve_upload(request, await file.read(), resolve_file_type(file.filename, None), options)
     record = await anyio.to_thread.run_sync(
-        _store(request).add, label, np.asarray(report.eigenvalues), file.filename or "upload"
+        (await _store(request)).add, label, np.asarray(report.eigenvalues), file.filename or "upload"
     )
     return ShapeOut(**record.__dict__)
 
@@ -108,7 +108,7 @@ async def list_shapes(
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
 ) -> ShapePage:
     """Stored shapes, oldest first, a page at a time."""
-    store = _store(request)
+    store = await _store(request)
     records = await anyio.to_thread.run_sync(store.page, offset, limit)
     total = await anyio.to_thread.run_sync(store.count)
     return ShapePage(total=total, offset=offset, shapes=[ShapeOut(**r.__dict__) for r in records])
@@ -129,6 +129,6 @@ async def delete_shape(
 ) -> Response:
     """Remove a stored shape."""
     _require_key(settings, x_api_key)
-    if not await anyio.to_thread.run_sync(_store(request).delete, shape_id):
+    if not await anyio.to_thread.run_sync((await _store(request)).delete, shape_id):
         raise ProblemError(404, "shape-not-found", "Shape not found", f"no shape with id {shape_id}")
     return Response(status_code=204)

@@ -16,10 +16,11 @@ from pydantic import BaseModel, Field
 from app.api.deps import SettingsDep
 from app.api.metrics import INFERENCE
 from app.api.operands import Operand, resolve_operands
-from app.api.problems import problem_responses
+from app.api.problems import ProblemError, problem_responses
 from app.core.config import Settings
 from app.inference.models import INTERVAL_Z, SpectralModels, Union
 from app.inference.template import PART_NAMES, coloured_template
+from app.retrieval.store import StoreUnavailable
 
 router = APIRouter(tags=["unions"])
 
@@ -59,7 +60,8 @@ class LocalizeResponse(UnionResponse):
 
 class DatabaseInfo(BaseModel):
     backend: Literal["sqlite", "postgresql"]
-    shapes: int = Field(description="Complete shapes stored for retrieval.")
+    shapes: int | None = Field(description="Complete shapes stored for retrieval; null while the database is down.")
+    problem: str | None = Field(None, description="Why the database cannot be used, when it cannot.")
 
 
 class ModelsResponse(BaseModel):
@@ -73,7 +75,7 @@ class ModelsResponse(BaseModel):
 
 
 def _models(request: Request) -> SpectralModels:
-    return request.app.state.models
+    return request.app.state.resources.require_models()
 
 
 @dataclass(frozen=True)
@@ -172,11 +174,16 @@ async def localize(
     )
 
 
-@router.get("/models", response_model=ModelsResponse)
+@router.get("/models", response_model=ModelsResponse, responses=problem_responses(503))
 async def models_info(request: Request) -> ModelsResponse:
     """What is loaded: versions, k, units, the union interval's meaning, the template, the database."""
-    models, store = _models(request), request.app.state.store
-    shapes = await anyio.to_thread.run_sync(store.count)
+    models, resources = _models(request), request.app.state.resources
+    backend = "postgresql" if resources.settings.database_url else "sqlite"
+    try:
+        store = await resources.require_store()
+        database = DatabaseInfo(backend=backend, shapes=await anyio.to_thread.run_sync(store.count))
+    except (ProblemError, StoreUnavailable) as exc:
+        database = DatabaseInfo(backend=backend, shapes=None, problem=str(getattr(exc, "detail", exc)))
     return ModelsResponse(
         model_version=models.version,
         k=models.k,
@@ -184,5 +191,5 @@ async def models_info(request: Request) -> ModelsResponse:
         interval=f"eigenvalues ± {INTERVAL_Z}·sigma holds 90 % of held-out eigenvalues",
         template_vertices=len(models.template.vertices),
         parts=list(PART_NAMES),
-        database=DatabaseInfo(backend=store.backend, shapes=shapes),
+        database=database,
     )

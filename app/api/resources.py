@@ -1,0 +1,69 @@
+"""What the endpoints depend on — the models and the database — and whether each is usable.
+
+Readiness is the truth: a missing or corrupt artefact, or a database that cannot be reached,
+leaves the process up but not ready, and only the endpoints that need the broken part answer
+503 (retryable, with the reason). A database that was down at start-up is opened again on the
+next request that needs it, so a replica recovers without a restart.
+"""
+
+import anyio
+
+from app.api.problems import ProblemError
+from app.core.config import Settings
+from app.inference.models import SpectralModels
+from app.retrieval.seed import open_store
+from app.retrieval.store import ShapeStore, StoreUnavailable
+
+RETRY_AFTER = {"Retry-After": "5"}
+
+
+class Resources:
+    def __init__(self, settings: Settings) -> None:
+        self.settings = settings
+        self.models: SpectralModels | None = None
+        self.models_problem = "not loaded yet"
+        self._store: ShapeStore | None = None
+        self.store_problem = "not opened yet"
+
+    def open(self) -> None:
+        """Open both at start-up; failures are recorded, not raised."""
+        self._open_models()
+        self._open_store()
+
+    def _open_models(self) -> None:
+        try:
+            self.models = SpectralModels(self.settings.models_dir)
+        except Exception as exc:  # any unusable artefact (missing, corrupt, mismatched): not ready, with the reason
+            self.models, self.models_problem = None, f"{type(exc).__name__}: {exc}"
+
+    def _open_store(self) -> None:
+        try:
+            self._store = open_store(self.settings.database_path, self.settings.database_url, self.settings.models_dir)
+        except StoreUnavailable as exc:
+            self._store, self.store_problem = None, str(exc)
+
+    def require_models(self) -> SpectralModels:
+        if self.models is None:
+            raise ProblemError(503, "models-unavailable", "Models unavailable", self.models_problem, RETRY_AFTER)
+        return self.models
+
+    async def require_store(self) -> ShapeStore:
+        if self._store is None:
+            await anyio.to_thread.run_sync(self._open_store)
+        if self._store is None:
+            raise database_unavailable(self.store_problem)
+        return self._store
+
+    async def problems(self) -> list[str]:
+        """What keeps the service from being ready (empty when it is)."""
+        found = [] if self.models is not None else [f"models: {self.models_problem}"]
+        try:
+            store = await self.require_store()
+            await anyio.to_thread.run_sync(store.ping)
+        except (ProblemError, StoreUnavailable) as exc:
+            found.append(f"database: {getattr(exc, 'detail', exc)}")
+        return found
+
+
+def database_unavailable(detail: str) -> ProblemError:
+    return ProblemError(503, "database-unavailable", "Database unavailable", detail, RETRY_AFTER)
