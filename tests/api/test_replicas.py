@@ -4,10 +4,6 @@ What scale-out promises: a shape written through one replica is retrieved throug
 and replicas starting together seed the shared database once, not once each.
 """
 
-import os
-import subprocess
-import sys
-import time
 from collections.abc import Iterator
 
 import httpx
@@ -15,35 +11,9 @@ import psycopg
 import pytest
 
 from tests.api.conftest import API_KEY
+from tests.api.servers import start, wait_ready
 from tests.api.test_shapes_api import body_ply
 from tests.postgres import free_port
-
-STARTUP_SECONDS = 60
-
-
-def _start(port: int, database_url: str) -> subprocess.Popen:
-    environment = {
-        **os.environ,
-        "SPECTRAL_UNIONS_DATABASE_URL": database_url,
-        "SPECTRAL_UNIONS_API_KEY": API_KEY,
-        "SPECTRAL_UNIONS_SOLVER_CONCURRENCY": "1",
-    }
-    command = [sys.executable, "-c", "from app.cli import main; main()", "serve", "--port", str(port)]
-    return subprocess.Popen(command, env=environment, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-
-
-def _wait_ready(base: str, process: subprocess.Popen) -> None:
-    deadline = time.monotonic() + STARTUP_SECONDS
-    while time.monotonic() < deadline:
-        if process.poll() is not None:
-            raise RuntimeError(process.stderr.read().decode() if process.stderr else "replica exited")
-        try:
-            if httpx.get(f"{base}/readyz", timeout=1).status_code == 200:
-                return
-        except httpx.TransportError:
-            pass
-        time.sleep(0.2)
-    raise TimeoutError(f"{base} not ready after {STARTUP_SECONDS} s")
 
 
 @pytest.fixture(scope="module")
@@ -51,11 +21,11 @@ def replicas(postgres_url) -> Iterator[list[str]]:
     with psycopg.connect(postgres_url, autocommit=True) as connection:
         connection.execute("DROP TABLE IF EXISTS shapes")
     ports = [free_port(), free_port()]
-    processes = [_start(port, postgres_url) for port in ports]
+    processes = [start(port, {"SPECTRAL_UNIONS_DATABASE_URL": postgres_url}) for port in ports]
     bases = [f"http://127.0.0.1:{port}" for port in ports]
     try:
         for base, process in zip(bases, processes, strict=True):
-            _wait_ready(base, process)
+            wait_ready(base, process)
         yield bases
     finally:
         for process in processes:
