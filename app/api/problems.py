@@ -14,6 +14,7 @@ from app.geometry.errors import GeometryError, UnsupportedFileType
 from app.retrieval.store import StoreUnavailable
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
+RETRY_AFTER_UNAVAILABLE = "5"  # seconds: a restarting database or a replaced model file
 
 
 class Problem(BaseModel):
@@ -100,7 +101,7 @@ def install_problem_handlers(app: FastAPI) -> None:
     @app.exception_handler(StoreUnavailable)
     async def _store(_: Request, exc: StoreUnavailable) -> JSONResponse:
         response = problem_response(503, "database-unavailable", "Database unavailable", str(exc))
-        response.headers["Retry-After"] = "5"
+        response.headers["Retry-After"] = RETRY_AFTER_UNAVAILABLE
         return response
 
     @app.exception_handler(HTTPException)

@@ -8,13 +8,11 @@ next request that needs it, so a replica recovers without a restart.
 
 import anyio
 
-from app.api.problems import ProblemError
+from app.api.problems import RETRY_AFTER_UNAVAILABLE, ProblemError
 from app.core.config import Settings
 from app.inference.models import SpectralModels
 from app.retrieval.seed import open_store
 from app.retrieval.store import ShapeStore, StoreUnavailable
-
-RETRY_AFTER = {"Retry-After": "5"}
 
 
 class Resources:
@@ -44,14 +42,15 @@ class Resources:
 
     def require_models(self) -> SpectralModels:
         if self.models is None:
-            raise ProblemError(503, "models-unavailable", "Models unavailable", self.models_problem, RETRY_AFTER)
+            retry = {"Retry-After": RETRY_AFTER_UNAVAILABLE}
+            raise ProblemError(503, "models-unavailable", "Models unavailable", self.models_problem, retry)
         return self.models
 
     async def require_store(self) -> ShapeStore:
         if self._store is None:
             await anyio.to_thread.run_sync(self._open_store)
         if self._store is None:
-            raise database_unavailable(self.store_problem)
+            raise StoreUnavailable(self.store_problem)  # answered as 503 database-unavailable
         return self._store
 
     async def problems(self) -> list[str]:
@@ -60,10 +59,6 @@ class Resources:
         try:
             store = await self.require_store()
             await anyio.to_thread.run_sync(store.ping)
-        except (ProblemError, StoreUnavailable) as exc:
-            found.append(f"database: {getattr(exc, 'detail', exc)}")
+        except StoreUnavailable as exc:
+            found.append(f"database: {exc}")
         return found
-
-
-def database_unavailable(detail: str) -> ProblemError:
-    return ProblemError(503, "database-unavailable", "Database unavailable", detail, RETRY_AFTER)

@@ -16,7 +16,7 @@ from pydantic import BaseModel, Field
 from app.api.deps import SettingsDep
 from app.api.metrics import INFERENCE
 from app.api.operands import Operand, resolve_operands
-from app.api.problems import ProblemError, problem_responses
+from app.api.problems import problem_responses
 from app.core.config import Settings
 from app.inference.models import INTERVAL_Z, SpectralModels, Union
 from app.inference.template import PART_NAMES, coloured_template
@@ -182,8 +182,8 @@ async def models_info(request: Request) -> ModelsResponse:
     try:
         store = await resources.require_store()
         database = DatabaseInfo(backend=backend, shapes=await anyio.to_thread.run_sync(store.count))
-    except (ProblemError, StoreUnavailable) as exc:
-        database = DatabaseInfo(backend=backend, shapes=None, problem=str(getattr(exc, "detail", exc)))
+    except StoreUnavailable as exc:
+        database = DatabaseInfo(backend=backend, shapes=None, problem=str(exc))
     return ModelsResponse(
         model_version=models.version,
         k=models.k,
