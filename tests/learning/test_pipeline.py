@@ -48,6 +48,14 @@ def test_exported_union_commutes_and_is_non_decreasing(trained):
     assert (np.diff(ab, axis=1) >= 0).all() and (sigma > 0).all()
 
 
+def test_the_exported_folder_is_what_the_service_loads(trained):
+    from app.inference.models import SpectralModels
+
+    root, _ = trained
+    models = SpectralModels(root / "models")  # checksums verified, template and graphs agree
+    assert models.k == 20 and len(models.template.vertices) == models.vertex_area.shape[0]
+
+
 def test_localizer_fits_the_budget(trained):
     root, _ = trained
     path = root / "models" / "localizer.onnx"

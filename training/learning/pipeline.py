@@ -7,6 +7,7 @@ localizer with a full per-vertex output layer measures what the compact basis he
 """
 
 import json
+import shutil
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -74,6 +75,8 @@ def run_pipeline(data_dir: Path, runs: Path, models: Path, preset: TrainingPrese
     models.mkdir(parents=True, exist_ok=True)
     export_union(union, models / UNION_FILE)
     export_localizer(localizers["all"], models / LOCALIZER_FILE)
+    for name in ("template.npz", "template.json"):  # the template the localizer was trained on
+        shutil.copyfile(data_dir / "template" / name, models / name)
     write_manifest(models)
     real = data.pairs.rows(np.flatnonzero(data.pairs.split != "train"))
     parity = {
