@@ -9,12 +9,20 @@ from fastapi import FastAPI
 from app import __version__
 from app.api.metrics import MetricsMiddleware
 from app.api.metrics import router as metrics_router
-from app.api.operands import SolveSlots
+from app.api.operands import MAX_OPERANDS
 from app.api.problems import install_problem_handlers
 from app.api.resources import Resources
 from app.api.routes import health, shapes, spectrum, unions
+from app.api.shutdown import flip_readiness_on_exit_signals
+from app.api.solver import SolverPool
 from app.api.upload_limit import UploadLimitMiddleware
 from app.core.config import Settings, get_settings
+
+# Multipart parsing limits (the 2024 Starlette/python-multipart DoS fixes make them enforceable):
+# no route takes more than MAX_OPERANDS files or a handful of text fields, and the largest text
+# field, 32 spectra of 200 eigenvalues as JSON, is far below a MiB.
+MAX_FORM_FIELDS = 8
+MAX_FORM_FIELD_BYTES = 1024 * 1024
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -23,19 +31,31 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        app.state.solve_slots = SolveSlots(settings.solver_concurrency, settings.max_queued_solves)
+        solver = SolverPool(
+            settings.solver_concurrency,
+            settings.max_queued_solves,
+            settings.solve_timeout_seconds,
+            settings.solve_memory_mb,
+        )
+        await solver.start()
+        app.state.solver = solver
         resources = Resources(settings)
         await anyio.to_thread.run_sync(resources.open)  # what fails is reported by /readyz, not fatal
         app.state.resources = resources
         app.state.ready = True
-        yield
-        app.state.ready = False
+        flip_readiness_on_exit_signals(app)
+        try:
+            yield
+        finally:
+            app.state.ready = False
+            solver.close()
 
     app = FastAPI(
         title="spectral-unions",
         version=__version__,
         summary="Laplace–Beltrami spectra of partial deformable 3D shapes.",
         lifespan=lifespan,
+        form_limits={"max_files": MAX_OPERANDS, "max_fields": MAX_FORM_FIELDS, "max_part_size": MAX_FORM_FIELD_BYTES},
     )
     app.state.settings = settings
     app.add_middleware(UploadLimitMiddleware, max_bytes=settings.max_upload_bytes)

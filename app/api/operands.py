@@ -1,32 +1,28 @@
 """Operands of the spectral endpoints: uploaded files and spectra the client already has.
 
-Files (multipart field ``files``, repeated) are solved server-side, off the event loop, with
-the service's bounded concurrency; spectra (form field ``spectra``, a JSON list of eigenvalue
+Files (multipart field ``files``, repeated) are solved server-side by the solver workers
+(``app.api.solver``); spectra (form field ``spectra``, a JSON list of eigenvalue
 lists) are checked. Operands are taken in that order: files as uploaded, then spectra. An
 error names the operand it is about.
 """
 
 import json
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Literal
 
-import anyio
 import numpy as np
 from fastapi import Request, UploadFile
 
 from app.api.metrics import SOLVES
-from app.api.problems import ProblemError
+from app.api.solver import SolverPool
 from app.core.config import Settings
 from app.geometry.errors import GeometryError
 from app.geometry.io import resolve_file_type
-from app.geometry.pipeline import SpectrumOptions, SpectrumReport, spectrum_from_bytes
+from app.geometry.pipeline import SpectrumOptions, SpectrumReport
 from app.inference.spectra import InvalidSpectrum, checked_spectrum
 
 MAX_OPERANDS = 32
-RETRY_AFTER_SECONDS = 1  # a solve takes ~0.1–0.3 s: a queue slot frees within a second
 
 
 @dataclass(frozen=True)
@@ -63,41 +59,10 @@ def upload_options(settings: Settings, k: int, units: Literal["m", "cm", "mm"], 
     )
 
 
-class SolveSlots:
-    """Bounded admission to the eigen-solves: ``concurrency`` run, ``queue`` more may wait.
-
-    The count is taken and raised with no await in between, so concurrent requests on the
-    event loop cannot all slip past the check; beyond the bound an upload is refused at once
-    (503 with ``Retry-After``) instead of joining a backlog that would time its client out.
-    """
-
-    def __init__(self, concurrency: int, queue: int) -> None:
-        self.limiter = anyio.CapacityLimiter(concurrency)
-        self.capacity = concurrency + queue
-        self.admitted = 0
-
-    @contextmanager
-    def admission(self) -> Iterator[anyio.CapacityLimiter]:
-        if self.admitted >= self.capacity:
-            raise ProblemError(
-                503,
-                "overloaded",
-                "Overloaded",
-                f"{self.admitted} uploads are already being solved or waiting; retry after {RETRY_AFTER_SECONDS} s.",
-                headers={"Retry-After": str(RETRY_AFTER_SECONDS)},
-            )
-        self.admitted += 1
-        try:
-            yield self.limiter
-        finally:
-            self.admitted -= 1
-
-
 async def solve_upload(request: Request, data: bytes, file_type: str, options: SpectrumOptions) -> SpectrumReport:
-    """One uploaded shape's spectrum, solved off the event loop within the service's solve slots."""
-    slots: SolveSlots = request.app.state.solve_slots
-    with slots.admission() as limiter:
-        report = await anyio.to_thread.run_sync(spectrum_from_bytes, data, file_type, options, limiter=limiter)
+    """One uploaded shape's spectrum, from the service's solver workers (bounded, with a deadline)."""
+    solver: SolverPool = request.app.state.solver
+    report = await solver.solve(data, file_type, options)
     SOLVES.observe((report.assembly_ms + report.solve_ms) / 1e3)
     return report
 

@@ -40,6 +40,15 @@ class Settings(BaseSettings):
     max_queued_solves: int = Field(
         16, ge=0, description="Uploads that may wait for a solve slot; beyond them, 503 overloaded with Retry-After."
     )
+    solve_timeout_seconds: float = Field(
+        120.0, gt=0, description="Deadline of one solve; its worker is stopped and the client gets 422 solve-timeout."
+    )
+    solve_memory_mb: int = Field(
+        4096, ge=0, description="Address-space cap of a solver worker (0: none); beyond it, 422 solve-memory-exceeded."
+    )
+    shutdown_grace_seconds: float = Field(
+        30.0, gt=0, description="On SIGTERM, how long in-flight requests may take to finish before they are cancelled."
+    )
 
 
 @lru_cache

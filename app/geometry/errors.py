@@ -49,3 +49,17 @@ class SolverFailure(GeometryError):
 
     slug = "solver-failure"
     title = "Eigen-solver failed on this shape"
+
+
+class SolveTimeout(GeometryError):
+    """The solve ran past the service's deadline and its worker was stopped."""
+
+    slug = "solve-timeout"
+    title = "Solve ran past its deadline"
+
+
+class SolveMemoryExceeded(GeometryError):
+    """The solve needed more memory than a solver worker may use."""
+
+    slug = "solve-memory-exceeded"
+    title = "Solve needs too much memory"

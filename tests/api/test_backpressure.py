@@ -36,11 +36,11 @@ def busy_client(tmp_path):
 
 
 def _waiting(client: TestClient) -> int:
-    return client.app.state.solve_slots.limiter.statistics().tasks_waiting
+    return client.app.state.solver.limiter.statistics().tasks_waiting
 
 
 def test_a_full_queue_sheds_exactly_the_excess_with_a_retry_hint(busy_client):
-    limiter = busy_client.app.state.solve_slots.limiter
+    limiter = busy_client.app.state.solver.limiter
     holder = object()
     busy_client.portal.call(limiter.acquire_on_behalf_of_nowait, holder)
     body = patch_ply()

@@ -1,0 +1,108 @@
+"""Eigen-solves of uploaded shapes in worker processes: bounded, stoppable, memory-capped.
+
+A thread cannot be stopped, so a pathological upload solved in one would hold a slot (and
+its memory) for as long as it liked. Here each solve runs in a pebble worker process with a
+deadline: when it passes, pebble kills the worker and starts a fresh one, and the client
+gets 422 ``solve-timeout``. Each worker's address space is capped (``RLIMIT_AS``), so an
+upload whose factorization would not fit fails with 422 ``solve-memory-exceeded`` instead
+of taking the host's memory. A worker that dies for any other reason (killed, crashed) is
+replaced too; its request is answered 503 ``solver-crashed`` with ``Retry-After``.
+
+Admission is bounded in front of the pool: ``concurrency`` solves run, ``queue`` more may
+wait, and the rest are refused at once with 503 ``overloaded`` — never an unbounded backlog.
+Workers start from a fork server that has already imported the geometry code, so replacing
+one costs milliseconds, not the seconds of a fresh interpreter.
+"""
+
+import asyncio
+import multiprocessing
+import os
+import resource
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import anyio
+from pebble import ProcessExpired, ProcessPool
+
+from app.api.problems import ProblemError
+from app.geometry.errors import SolveMemoryExceeded, SolveTimeout
+from app.geometry.pipeline import SpectrumOptions, SpectrumReport, spectrum_from_bytes
+
+RETRY_AFTER_SECONDS = 1  # a solve takes ~0.1–0.3 s: a queue slot frees within a second
+_PRELOADED = ["app.geometry.pipeline"]
+_CONTEXT = multiprocessing.get_context("forkserver")
+
+
+def _cap_address_space(limit_bytes: int) -> None:
+    """Worker initializer: allocations beyond the cap raise MemoryError in this worker only."""
+    if limit_bytes > 0:
+        resource.setrlimit(resource.RLIMIT_AS, (limit_bytes, limit_bytes))
+
+
+class SolverPool:
+    """``concurrency`` worker processes behind a bounded admission count."""
+
+    def __init__(self, concurrency: int, queue: int, timeout_s: float, memory_mb: int) -> None:
+        self.limiter = anyio.CapacityLimiter(concurrency)
+        self.capacity = concurrency + queue
+        self.admitted = 0
+        self.timeout_s = timeout_s
+        _CONTEXT.set_forkserver_preload(_PRELOADED)
+        self._pool = ProcessPool(
+            max_workers=concurrency,
+            context=_CONTEXT,
+            initializer=_cap_address_space,
+            initargs=(memory_mb * 1024 * 1024,),
+        )
+
+    async def start(self) -> None:
+        """Start the workers now, so the first upload does not pay for the fork server."""
+        await asyncio.wrap_future(self._pool.schedule(os.getpid))
+
+    def close(self) -> None:
+        """Stop the workers; in-flight requests were drained by the server before this."""
+        self._pool.stop()
+        self._pool.join()
+
+    def worker_pids(self) -> list[int]:
+        """The live workers' process ids (for fault tests and the fault benchmark)."""
+        return [worker.pid for worker in self._pool._pool_manager.worker_manager.workers.values()]
+
+    async def solve(self, data: bytes, file_type: str, options: SpectrumOptions) -> SpectrumReport:
+        """The spectrum of one upload, or the error that says why not; see the module docstring."""
+        with self._admission():
+            async with self.limiter:
+                task = (data, file_type, options)
+                future = self._pool.schedule(spectrum_from_bytes, args=task, timeout=self.timeout_s)
+                try:
+                    return await asyncio.wrap_future(future)
+                except TimeoutError as exc:
+                    raise SolveTimeout(f"the solve did not finish within {self.timeout_s:g} s") from exc
+                except MemoryError as exc:
+                    raise SolveMemoryExceeded("the solve needed more memory than a solver worker may use") from exc
+                except ProcessExpired as exc:
+                    raise ProblemError(
+                        503,
+                        "solver-crashed",
+                        "Solver crashed",
+                        f"the solver process stopped while solving this shape ({exc}); retry.",
+                        headers={"Retry-After": str(RETRY_AFTER_SECONDS)},
+                    ) from exc
+
+    @contextmanager
+    def _admission(self) -> Iterator[None]:
+        """Count the upload in, or refuse it now. No await between the check and the count, so
+        concurrent requests on the event loop cannot all slip past the bound."""
+        if self.admitted >= self.capacity:
+            raise ProblemError(
+                503,
+                "overloaded",
+                "Overloaded",
+                f"{self.admitted} uploads are already being solved or waiting; retry after {RETRY_AFTER_SECONDS} s.",
+                headers={"Retry-After": str(RETRY_AFTER_SECONDS)},
+            )
+        self.admitted += 1
+        try:
+            yield
+        finally:
+            self.admitted -= 1

@@ -1,0 +1,95 @@
+"""Solves that run too long, need too much memory, or lose their worker: a clear error, then service as usual.
+
+Each case is checked on the client's side (status, problem slug, how fast the answer came)
+and on the pool's (the worker was replaced, the next upload is solved normally).
+"""
+
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import anyio
+import pytest
+from fastapi.testclient import TestClient
+
+from app.api.solver import SolverPool
+from app.main import create_app
+from tests.api.conftest import settings_for
+from tests.builders import mesh_bytes
+from tests.conftest import bumpy_patch, grid
+
+LARGE = mesh_bytes(grid(1.0, 1.0, 315, 315), "ply")  # ~100 k vertices: seconds and ~300 MB to solve
+SMALL = mesh_bytes(bumpy_patch(seed=2, n=400), "ply")
+
+
+def client_for(tmp_path: Path, **overrides) -> TestClient:
+    settings = settings_for(tmp_path / "shapes.sqlite").model_copy(
+        update={"solver_concurrency": 1, "max_upload_bytes": 32_000_000, "max_vertices": 200_000, **overrides}
+    )
+    return TestClient(create_app(settings))
+
+
+def post(client: TestClient, body: bytes, name: str = "shape.ply"):
+    return client.post("/v1/spectrum", files={"file": (name, body)})
+
+
+def test_a_solve_past_its_deadline_is_stopped_and_answered_422(tmp_path):
+    with client_for(tmp_path, solve_timeout_seconds=0.3) as client:
+        before = client.app.state.solver.worker_pids()
+        started = time.monotonic()
+        response = post(client, LARGE)
+        waited = time.monotonic() - started
+        assert response.status_code == 422, response.text
+        assert response.json()["type"] == "/problems/solve-timeout"
+        assert waited < 3.0  # the deadline, not the solve, decided when the client heard back
+        assert post(client, SMALL).status_code == 200
+        assert set(client.app.state.solver.worker_pids()).isdisjoint(before)
+
+
+def _idle_worker_address_space_mb() -> float:
+    """What a solver worker maps before it solves anything (numpy, scipy, BLAS buffers)."""
+
+    async def measure() -> float:
+        pool = SolverPool(1, 0, 60, 0)
+        await pool.start()
+        try:
+            status = Path(f"/proc/{pool.worker_pids()[0]}/status").read_text()
+        finally:
+            pool.close()
+        line = next(line for line in status.splitlines() if line.startswith("VmSize:"))
+        return int(line.split()[1]) / 1024
+
+    return anyio.run(measure)
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads the worker's VmSize from /proc")
+def test_a_solve_over_the_memory_cap_is_answered_422_and_small_ones_still_fit(tmp_path):
+    cap = int(_idle_worker_address_space_mb()) + 120  # the small patch needs a few MB, the large grid ~300
+    with client_for(tmp_path, solve_memory_mb=cap) as client:
+        response = post(client, LARGE)
+        assert response.status_code == 422, response.text
+        assert response.json()["type"] == "/problems/solve-memory-exceeded"
+        assert post(client, SMALL).status_code == 200
+
+
+def test_a_worker_killed_mid_solve_gives_a_retryable_503_and_is_replaced(tmp_path):
+    with client_for(tmp_path) as client:
+        solver = client.app.state.solver
+        responses = []
+        thread = threading.Thread(target=lambda: responses.append(post(client, LARGE)))
+        thread.start()
+        deadline = time.monotonic() + 30
+        while solver.limiter.borrowed_tokens == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(0.3)  # parsing is done; the worker is inside the solve
+        victims = solver.worker_pids()
+        for pid in victims:
+            os.kill(pid, signal.SIGKILL)
+        thread.join(timeout=60)
+        assert responses[0].status_code == 503, responses[0].text
+        assert responses[0].json()["type"] == "/problems/solver-crashed"
+        assert responses[0].headers["retry-after"] == "1"
+        assert post(client, SMALL).status_code == 200
+        assert set(solver.worker_pids()).isdisjoint(victims)
