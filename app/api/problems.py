@@ -4,6 +4,8 @@ Body: ``{"type": "/problems/<slug>", "title": ..., "status": ..., "detail": ...}
 is stable and documented in the README, so clients can branch on it.
 """
 
+import errno
+
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
@@ -47,6 +49,7 @@ def status_for(error: GeometryError) -> int:
 
 # Representative problems per status for the OpenAPI page: (slug, title, detail).
 EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
+    400: [("invalid-form", "Invalid form data", "Too many files. Maximum number of files is 32.")],
     401: [("invalid-api-key", "Invalid API key", "X-API-Key is missing or does not match.")],
     403: [("writes-disabled", "Writes disabled", "No API key is configured, so /v1/shapes is read-only.")],
     404: [("shape-not-found", "Shape not found", "No stored shape has id 3f2a….")],
@@ -56,6 +59,12 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
         ("invalid-spectrum", "Invalid spectrum", "operand 2 (spectra[1]): eigenvalues must be non-decreasing."),
         ("invalid-geometry", "Invalid geometry", "operand 1 (files[0], scan.ply): coordinates contain NaN or inf."),
         ("invalid-request", "Invalid request", "query.top: Input should be less than or equal to 100"),
+        ("solve-timeout", "Solve ran past its deadline", "files[0] scan.ply: the solve did not finish within 120 s"),
+        (
+            "solve-memory-exceeded",
+            "Solve needs too much memory",
+            "files[0] scan.ply: the solve needed more memory than a solver worker may use",
+        ),
     ],
     503: [
         (
@@ -66,8 +75,14 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
         ("models-unavailable", "Models unavailable", "ModelsCorrupt: union.onnx is missing from /srv/models"),
         ("database-unavailable", "Database unavailable", "PostgreSQL: connection refused"),
         ("overloaded", "Overloaded", "16 uploads are already waiting for a solve slot; retry after 1 s."),
+        ("solver-crashed", "Solver crashed", "the solver process stopped while solving this shape (…); retry."),
+        ("upload-storage-full", "Upload storage full", "the server has no temporary space left to receive this upload"),
     ],
 }
+
+
+# What any route that takes an uploaded file can answer besides its own errors.
+UPLOAD_PROBLEMS = (400, 413, 415, 422, 503)
 
 
 def problem_responses(*statuses: int, slugs: set[str] | None = None) -> dict[int | str, dict]:
@@ -84,6 +99,22 @@ def _documented(status: int, slugs: set[str] | None) -> dict:
     }
     content = {PROBLEM_MEDIA_TYPE: {"schema": Problem.model_json_schema(), "examples": examples}}
     return {"content": content, "description": "Problem"}
+
+
+# Errors raised by Starlette/FastAPI themselves, which carry no slug: a multipart body that is
+# malformed or over the form limits (too many files or fields, a text field over its size) is 400.
+FRAMEWORK_PROBLEMS = {
+    400: ("invalid-form", "Invalid form data"),
+    404: ("not-found", "Not found"),
+    405: ("method-not-allowed", "Method not allowed"),
+}
+
+
+def _out_of_spool_space(exc: HTTPException) -> bool:
+    """Whether parsing the form failed because the disk behind uploaded-file spooling is full.
+    FastAPI reports every parse failure as a 400; this one is the server's, so 503."""
+    cause = exc.__cause__
+    return isinstance(cause, OSError) and cause.errno in (errno.ENOSPC, errno.EDQUOT)
 
 
 def install_problem_handlers(app: FastAPI) -> None:
@@ -106,8 +137,16 @@ def install_problem_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(HTTPException)
     async def _http(_: Request, exc: HTTPException) -> JSONResponse:
-        slug = getattr(exc, "slug", f"http-{exc.status_code}")
-        title = getattr(exc, "title", str(exc.detail))
+        if _out_of_spool_space(exc):
+            exc = ProblemError(
+                503,
+                "upload-storage-full",
+                "Upload storage full",
+                "the server has no temporary space left to receive this upload; retry later.",
+                headers={"Retry-After": RETRY_AFTER_UNAVAILABLE},
+            )
+        slug, title = FRAMEWORK_PROBLEMS.get(exc.status_code, (f"http-{exc.status_code}", str(exc.detail)))
+        slug, title = getattr(exc, "slug", slug), getattr(exc, "title", title)
         response = problem_response(exc.status_code, slug, title, str(exc.detail))
         response.headers.update(exc.headers or {})
         return response

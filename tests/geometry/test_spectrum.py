@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import scipy.sparse.linalg as sla
 
+from app.geometry.errors import SolverFailure
 from app.geometry.laplacian import mesh_operators
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
@@ -118,3 +119,12 @@ def test_eigenfunctions_are_mass_orthonormal_and_solve_the_pencil(patch):
     np.testing.assert_allclose(gram, np.eye(8), atol=1e-8)
     residual = operators.stiffness @ functions - operators.mass @ functions * values
     assert np.abs(residual).max() < 1e-8 * values.max()
+
+
+def test_a_solver_breakdown_is_a_solver_failure_not_a_crash(patch):
+    """ARPACK cannot build an Arnoldi factorization from a poisoned operator: the caller gets our error."""
+    stiffness, mass = mesh_operators(patch.vertices, patch.faces)
+    poisoned = stiffness.tolil()
+    poisoned[5, 5] = np.nan
+    with pytest.raises(SolverFailure, match="eigen-solver failed"):
+        eigenvalues((poisoned.tocsr(), mass), 10)

@@ -14,7 +14,7 @@ from pydantic import BaseModel, Field
 
 from app.api.deps import SettingsDep
 from app.api.operands import solve_upload, upload_options
-from app.api.problems import ProblemError, problem_responses
+from app.api.problems import UPLOAD_PROBLEMS, ProblemError, problem_responses
 from app.api.routes.unions import FilesField, ScaleQuery, SpectraField, UnitsQuery, union_of_operands
 from app.geometry.io import resolve_file_type
 from app.retrieval.store import ShapeStore
@@ -60,7 +60,7 @@ def _require_key(settings, given: str | None) -> None:
         raise ProblemError(401, "invalid-api-key", "Invalid API key", "X-API-Key is missing or wrong")
 
 
-@router.post("/retrieve", response_model=RetrieveResponse, responses=problem_responses(413, 415, 422, 503))
+@router.post("/retrieve", response_model=RetrieveResponse, responses=problem_responses(*UPLOAD_PROBLEMS))
 async def retrieve(
     request: Request,
     settings: SettingsDep,
@@ -80,7 +80,7 @@ async def retrieve(
 
 
 @router.post(
-    "/shapes", response_model=ShapeOut, status_code=201, responses=problem_responses(401, 403, 413, 415, 422, 503)
+    "/shapes", response_model=ShapeOut, status_code=201, responses=problem_responses(401, 403, *UPLOAD_PROBLEMS)
 )
 async def add_shape(
     request: Request,

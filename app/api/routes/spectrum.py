@@ -7,7 +7,7 @@ from fastapi import APIRouter, File, Form, Query, Request, UploadFile
 
 from app.api.deps import SettingsDep
 from app.api.operands import solve_upload
-from app.api.problems import problem_responses
+from app.api.problems import UPLOAD_PROBLEMS, problem_responses
 from app.geometry.errors import InvalidGeometry
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
 from app.geometry.pipeline import SpectrumOptions, SpectrumReport
@@ -19,7 +19,7 @@ router = APIRouter(tags=["spectra"])
 @router.post(
     "/spectrum",
     response_model=SpectrumReport,
-    responses=problem_responses(413, 415, 422, 503),
+    responses=problem_responses(*UPLOAD_PROBLEMS),
 )
 async def spectrum(
     request: Request,

@@ -16,7 +16,7 @@ from pydantic import BaseModel, Field
 from app.api.deps import SettingsDep
 from app.api.metrics import INFERENCE
 from app.api.operands import Operand, resolve_operands
-from app.api.problems import problem_responses
+from app.api.problems import UPLOAD_PROBLEMS, problem_responses
 from app.core.config import Settings
 from app.inference.models import INTERVAL_Z, SpectralModels, Union
 from app.inference.template import PART_NAMES, coloured_template
@@ -120,7 +120,7 @@ async def union_of_operands(
     return UnionOutcome(operands, result, solve_ms, seconds * 1e3)
 
 
-@router.post("/union", response_model=UnionResponse, responses=problem_responses(413, 415, 422, 503))
+@router.post("/union", response_model=UnionResponse, responses=problem_responses(*UPLOAD_PROBLEMS))
 async def union(
     request: Request,
     settings: SettingsDep,
@@ -141,7 +141,7 @@ async def union(
 @router.post(
     "/localize",
     response_model=LocalizeResponse,
-    responses={**problem_responses(413, 415, 422, 503), 200: {"content": {"application/ply": {}}}},
+    responses={**problem_responses(*UPLOAD_PROBLEMS), 200: {"content": {"application/ply": {}}}},
 )
 async def localize(
     request: Request,
