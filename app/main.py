@@ -19,9 +19,10 @@ from app.api.upload_limit import UploadLimitMiddleware
 from app.core.config import Settings, get_settings
 
 # Multipart parsing limits (the 2024 Starlette/python-multipart DoS fixes make them enforceable):
-# no route takes more than MAX_OPERANDS files or a handful of text fields, and the largest text
-# field, 32 spectra of 200 eigenvalues as JSON, is far below a MiB.
-MAX_FORM_FIELDS = 8
+# no route takes more than MAX_OPERANDS files or a handful of text fields (a client that sends its
+# files without file names sends them as text fields), and the largest text field, 32 spectra of
+# 200 eigenvalues as JSON, is far below a MiB.
+MAX_FORM_FIELDS = MAX_OPERANDS + 8
 MAX_FORM_FIELD_BYTES = 1024 * 1024
 
 

@@ -11,6 +11,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 from starlette.exceptions import HTTPException
+from starlette.routing import Match
 
 from app.geometry.errors import GeometryError, UnsupportedFileType
 from app.retrieval.store import StoreUnavailable
@@ -117,6 +118,17 @@ def _out_of_spool_space(exc: HTTPException) -> bool:
     return isinstance(cause, OSError) and cause.errno in (errno.ENOSPC, errno.EDQUOT)
 
 
+def _allowed_methods(request: Request) -> list[str]:
+    """Every method some route serves at this path. Starlette's own 405 names only the first
+    route that matched the path, so GET and POST /v1/shapes (two routes) would hide each other."""
+    methods: set[str] = set()
+    for route in request.app.routes:
+        match, _ = route.matches({**request.scope, "method": "\0"})
+        if match is not Match.NONE:
+            methods |= getattr(route, "methods", None) or set()
+    return sorted(methods)
+
+
 def install_problem_handlers(app: FastAPI) -> None:
     """Route every error through the one problem+json shape; none leaks as HTML or plain text."""
 
@@ -136,7 +148,7 @@ def install_problem_handlers(app: FastAPI) -> None:
         return response
 
     @app.exception_handler(HTTPException)
-    async def _http(_: Request, exc: HTTPException) -> JSONResponse:
+    async def _http(request: Request, exc: HTTPException) -> JSONResponse:
         if _out_of_spool_space(exc):
             exc = ProblemError(
                 503,
@@ -149,6 +161,8 @@ def install_problem_handlers(app: FastAPI) -> None:
         slug, title = getattr(exc, "slug", slug), getattr(exc, "title", title)
         response = problem_response(exc.status_code, slug, title, str(exc.detail))
         response.headers.update(exc.headers or {})
+        if exc.status_code == 405:
+            response.headers["Allow"] = ", ".join(_allowed_methods(request))
         return response
 
     @app.exception_handler(Exception)

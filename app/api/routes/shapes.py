@@ -21,6 +21,7 @@ from app.retrieval.store import ShapeStore
 
 router = APIRouter(tags=["retrieval"])
 MAX_TOP = 100
+MAX_OFFSET = 2**31  # far past any store; beyond, SQLite's integer binding would overflow
 
 
 class ShapeOut(BaseModel):
@@ -104,7 +105,7 @@ async def add_shape(
 @router.get("/shapes", response_model=ShapePage, responses=problem_responses(422, slugs={"invalid-request"}))
 async def list_shapes(
     request: Request,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=MAX_OFFSET, description="Shapes to skip.")] = 0,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
 ) -> ShapePage:
     """Stored shapes, oldest first, a page at a time."""

@@ -15,7 +15,7 @@ from pydantic import BaseModel, Field
 
 from app.api.deps import SettingsDep
 from app.api.metrics import INFERENCE
-from app.api.operands import Operand, resolve_operands
+from app.api.operands import MAX_OPERANDS, Operand, resolve_operands
 from app.api.problems import UPLOAD_PROBLEMS, problem_responses
 from app.core.config import Settings
 from app.inference.models import INTERVAL_Z, SpectralModels, Union
@@ -25,7 +25,8 @@ from app.retrieval.store import StoreUnavailable
 router = APIRouter(tags=["unions"])
 
 FilesField = Annotated[
-    list[UploadFile] | None, File(description="Partial scans (mesh or point cloud), one operand each.")
+    list[UploadFile] | None,
+    File(max_length=MAX_OPERANDS, description="Partial scans (mesh or point cloud), one operand each."),
 ]
 SpectraField = Annotated[
     str | None,
