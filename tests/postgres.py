@@ -38,31 +38,51 @@ def _as_server_user(command: list[str]) -> list[str]:
     return command
 
 
+class ThrowawayPostgres:
+    """A PostgreSQL server in a temporary folder on a free loopback port, stoppable and restartable
+    (the fault benchmark stops it under a running service)."""
+
+    def __init__(self) -> None:
+        self.initdb, self.pg_ctl = _binary("initdb"), _binary("pg_ctl")
+        if not (self.initdb and self.pg_ctl):
+            raise FileNotFoundError("PostgreSQL server binaries not installed (apt-get install postgresql)")
+        self.root = Path(tempfile.mkdtemp(prefix="spectral-unions-pg-"))
+        if os.geteuid() == 0:
+            shutil.chown(self.root, "postgres")
+        self.data, self.port = self.root / "data", free_port()
+        self.url = f"postgresql://postgres@127.0.0.1:{self.port}/postgres"
+        subprocess.run(
+            _as_server_user([self.initdb, "-D", str(self.data), "-A", "trust", "-U", "postgres"]),
+            check=True,
+            capture_output=True,
+        )
+
+    def start(self) -> None:
+        options = f"-p {self.port} -k {self.root} -c listen_addresses=127.0.0.1 -c fsync=on"
+        command = [self.pg_ctl, "-D", str(self.data), "-o", options, "-l", str(self.root / "log"), "-w", "start"]
+        subprocess.run(_as_server_user(command), check=True, capture_output=True)
+        for _ in range(50):
+            try:
+                psycopg.connect(self.url).close()
+                return
+            except psycopg.OperationalError:
+                time.sleep(0.1)
+
+    def stop(self) -> None:
+        command = [self.pg_ctl, "-D", str(self.data), "-m", "immediate", "stop"]
+        subprocess.run(_as_server_user(command), capture_output=True)
+
+    def remove(self) -> None:
+        self.stop()
+        shutil.rmtree(self.root, ignore_errors=True)
+
+
 @pytest.fixture(scope="session")
 def postgres_url():
-    initdb, pg_ctl = _binary("initdb"), _binary("pg_ctl")
-    if not (initdb and pg_ctl):
-        pytest.skip("PostgreSQL server binaries not installed (apt-get install postgresql postgresql-contrib)")
-    root = Path(tempfile.mkdtemp(prefix="spectral-unions-pg-"))
-    if os.geteuid() == 0:
-        shutil.chown(root, "postgres")
-    data, port = root / "data", free_port()
-    subprocess.run(
-        _as_server_user([initdb, "-D", str(data), "-A", "trust", "-U", "postgres"]), check=True, capture_output=True
-    )
-    options = f"-p {port} -k {root} -c listen_addresses=127.0.0.1 -c fsync=on"
-    subprocess.run(
-        _as_server_user([pg_ctl, "-D", str(data), "-o", options, "-l", str(root / "log"), "-w", "start"]),
-        check=True,
-        capture_output=True,
-    )
-    url = f"postgresql://postgres@127.0.0.1:{port}/postgres"
-    for _ in range(50):
-        try:
-            psycopg.connect(url).close()
-            break
-        except psycopg.OperationalError:
-            time.sleep(0.1)
-    yield url
-    subprocess.run(_as_server_user([pg_ctl, "-D", str(data), "-m", "immediate", "stop"]), capture_output=True)
-    shutil.rmtree(root, ignore_errors=True)
+    try:
+        server = ThrowawayPostgres()
+    except FileNotFoundError as exc:
+        pytest.skip(str(exc))
+    server.start()
+    yield server.url
+    server.remove()

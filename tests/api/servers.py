@@ -12,13 +12,14 @@ from tests.api.conftest import API_KEY
 STARTUP_SECONDS = 60
 
 
-def start(port: int, database: dict[str, str]) -> subprocess.Popen:
-    """``spectral-unions serve`` on ``port`` with the test key and ``database`` settings (env names)."""
+def start(port: int, settings: dict[str, str]) -> subprocess.Popen:
+    """``spectral-unions serve`` on ``port`` with the test key, one solver worker, and ``settings``
+    (environment variables, e.g. the database; they override those defaults)."""
     environment = {
         **os.environ,
-        **database,
         "SPECTRAL_UNIONS_API_KEY": API_KEY,
         "SPECTRAL_UNIONS_SOLVER_CONCURRENCY": "1",
+        **settings,
     }
     command = [sys.executable, "-c", "from app.cli import main; main()", "serve", "--port", str(port)]
     return subprocess.Popen(command, env=environment, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
