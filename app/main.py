@@ -37,6 +37,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             settings.max_queued_solves,
             settings.solve_timeout_seconds,
             settings.solve_memory_mb,
+            settings.solves_per_worker,
         )
         await solver.start()
         app.state.solver = solver

@@ -11,7 +11,9 @@ replaced too; its request is answered 503 ``solver-crashed`` with ``Retry-After`
 Admission is bounded in front of the pool: ``concurrency`` solves run, ``queue`` more may
 wait, and the rest are refused at once with 503 ``overloaded`` — never an unbounded backlog.
 Workers start from a fork server that has already imported the geometry code, so replacing
-one costs milliseconds, not the seconds of a fresh interpreter.
+one costs milliseconds, not the seconds of a fresh interpreter; that is also why each worker is
+retired after ``tasks_per_worker`` solves (0: never): a worker's resident memory creeps up by
+~15 MB per 300 solves (allocator fragmentation), and a fresh one starts from ~90 MB.
 """
 
 import asyncio
@@ -42,7 +44,9 @@ def _cap_address_space(limit_bytes: int) -> None:
 class SolverPool:
     """``concurrency`` worker processes behind a bounded admission count."""
 
-    def __init__(self, concurrency: int, queue: int, timeout_s: float, memory_mb: int) -> None:
+    def __init__(
+        self, concurrency: int, queue: int, timeout_s: float, memory_mb: int, tasks_per_worker: int = 0
+    ) -> None:
         self.limiter = anyio.CapacityLimiter(concurrency)
         self.capacity = concurrency + queue
         self.admitted = 0
@@ -50,6 +54,7 @@ class SolverPool:
         _CONTEXT.set_forkserver_preload(_PRELOADED)
         self._pool = ProcessPool(
             max_workers=concurrency,
+            max_tasks=tasks_per_worker,
             context=_CONTEXT,
             initializer=_cap_address_space,
             initargs=(memory_mb * 1024 * 1024,),

@@ -46,6 +46,9 @@ class Settings(BaseSettings):
     solve_memory_mb: int = Field(
         4096, ge=0, description="Address-space cap of a solver worker (0: none); beyond it, 422 solve-memory-exceeded."
     )
+    solves_per_worker: int = Field(
+        500, ge=0, description="Solves after which a solver worker is replaced by a fresh one (0: never)."
+    )
     shutdown_grace_seconds: float = Field(
         30.0, gt=0, description="On SIGTERM, how long in-flight requests may take to finish before they are cancelled."
     )

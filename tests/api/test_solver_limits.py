@@ -15,6 +15,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.api.solver import SolverPool
+from app.geometry.pipeline import SpectrumOptions
 from app.main import create_app
 from tests.api.conftest import settings_for
 from tests.builders import mesh_bytes
@@ -93,3 +94,19 @@ def test_a_worker_killed_mid_solve_gives_a_retryable_503_and_is_replaced(tmp_pat
         assert responses[0].headers["retry-after"] == "1"
         assert post(client, SMALL).status_code == 200
         assert set(solver.worker_pids()).isdisjoint(victims)
+
+
+def test_a_worker_is_retired_after_its_quota_of_solves():
+    async def pids_around_three_solves() -> tuple[list[int], list[int]]:
+        pool = SolverPool(1, 0, 60, 0, tasks_per_worker=2)
+        await pool.start()  # the warm-up counts as the first worker's first task
+        try:
+            first = pool.worker_pids()
+            for _ in range(3):
+                await pool.solve(SMALL, "ply", SpectrumOptions(k=5))
+            return first, pool.worker_pids()
+        finally:
+            pool.close()
+
+    first, later = anyio.run(pids_around_three_solves)
+    assert set(first).isdisjoint(later)
