@@ -170,7 +170,7 @@ def spool_full(folder: Path) -> None:
         ):
             wait_ready(base, process)
             filler = spool / "filler"
-            with open(filler, "wb") as sink:
+            with open(filler, "wb", buffering=0) as sink:
                 try:
                     while True:
                         sink.write(b"\0" * 65536)
@@ -200,9 +200,12 @@ SCENARIOS = {
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("scenarios", nargs="*", choices=[*SCENARIOS, []], default=list(SCENARIOS))
+    parser.add_argument("scenarios", nargs="*", help=f"some of {', '.join(SCENARIOS)} (default: all)")
     args = parser.parse_args()
-    for scenario in args.scenarios:
+    unknown = set(args.scenarios) - set(SCENARIOS)
+    if unknown:
+        parser.error(f"unknown scenarios: {', '.join(sorted(unknown))}")
+    for scenario in args.scenarios or SCENARIOS:
         with tempfile.TemporaryDirectory() as folder:
             SCENARIOS[scenario](Path(folder))
 
