@@ -1,4 +1,7 @@
-"""Uploads built to hurt: each is refused with its documented problem, quickly, and the next request is served.
+"""Uploads built to hurt: each is refused with its documented problem, and the next request is served.
+
+How fast the refusals come is measured by ``benchmarks/faults.py`` and the overload benchmark
+(docs/reliability.md), not asserted here.
 
 The cheap cases (a corrupt file, a mesh with NaNs, an archive, an over-cap body) live in
 ``test_spectrum_api.py``; these are the ones aimed at the server itself.
@@ -6,7 +9,6 @@ The cheap cases (a corrupt file, a mesh with NaNs, an archive, an over-cap body)
 
 import errno
 import io
-import time
 import zipfile
 from importlib.metadata import version
 
@@ -16,8 +18,6 @@ import starlette.formparsers
 from tests.api.test_spectrum_api import assert_problem, post
 from tests.builders import mesh_bytes
 from tests.conftest import bumpy_patch
-
-QUICK_SECONDS = 2.0  # "quickly": a refusal must not cost what a solve costs
 
 # Advisories against the multipart stack with the release that fixed each; the pins must be at
 # or past every one (python-multipart parses, Starlette enforces the limits).
@@ -51,16 +51,9 @@ def test_the_multipart_stack_is_past_every_known_dos_fix(package):
     assert not missing, f"{package} {version(package)} lacks the fixes for {missing}"
 
 
-def _quick(request):
-    started = time.monotonic()
-    response = request()
-    assert time.monotonic() - started < QUICK_SECONDS
-    return response
-
-
 def test_more_files_than_any_route_takes_is_a_400(client):
     files = [("files", (f"p{i}.ply", b"ply\n")) for i in range(40)]
-    response = _quick(lambda: client.post("/v1/union", files=files))
+    response = client.post("/v1/union", files=files)
     assert "files" in assert_problem(response, 400, "invalid-form")["detail"]
 
 
@@ -68,16 +61,16 @@ def test_more_files_than_any_route_takes_is_a_400(client):
 def test_a_flood_of_form_fields_is_a_400(client, content):
     fields = {f"f{i}": "x" for i in range(5000)}
     if content == "multipart":
-        response = _quick(lambda: client.post("/v1/union", data=fields, files={"files": ("a.ply", b"x")}))
+        response = client.post("/v1/union", data=fields, files={"files": ("a.ply", b"x")})
         assert_problem(response, 400, "invalid-form")
     else:  # no route takes a urlencoded body: it is refused without being parsed into 5 000 fields
-        response = _quick(lambda: client.post("/v1/union", data=fields))
+        response = client.post("/v1/union", data=fields)
         assert response.status_code in (400, 422) and response.headers["content-type"] == "application/problem+json"
 
 
 def test_a_text_field_over_a_mebibyte_is_a_400(client):
     spectra = "[[" + ",".join(["1.0"] * 300_000) + "]]"
-    response = _quick(lambda: client.post("/v1/union", data={"spectra": spectra}, files={"files": ("a.ply", b"x")}))
+    response = client.post("/v1/union", data={"spectra": spectra}, files={"files": ("a.ply", b"x")})
     assert_problem(response, 400, "invalid-form")
 
 
@@ -98,13 +91,13 @@ def _zip_bomb(inflated_bytes: int = 200 * 1024 * 1024) -> bytes:
 def test_a_zip_bomb_is_never_inflated(client, name, status, slug):
     bomb = _zip_bomb()
     assert len(bomb) < 1_000_000
-    assert_problem(_quick(lambda: post(client, name, bomb)), status, slug)
+    assert_problem(post(client, name, bomb), status, slug)
 
 
 def test_a_ply_header_declaring_a_billion_vertices_is_refused_before_parsing(client):
     header = b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000\nproperty float x\n"
     header += b"property float y\nproperty float z\nend_header\n"
-    response = _quick(lambda: post(client, "huge.ply", header + b"\0" * 1200))
+    response = post(client, "huge.ply", header + b"\0" * 1200)
     assert_problem(response, 422, "too-many-vertices")
 
 

