@@ -26,6 +26,7 @@ from training.learning.fit import (
 from training.learning.union_net import UnionConfig, UnionOperator
 
 INTERVAL_Z = 1.6449  # μ ± z·σ is the stated 90 % interval
+RELATIVE_FLOOR = 1.0  # 1/m²: keeps λ₁ = 0 of a closed union from dividing by zero
 
 
 @dataclass(frozen=True)
@@ -54,7 +55,13 @@ def _jitter(x: torch.Tensor, amount: float, generator: torch.Generator) -> torch
 def _losses(
     model: UnionOperator, pairs: tuple[torch.Tensor, ...], chains: tuple[torch.Tensor, ...] | None
 ) -> torch.Tensor:
-    """MSE of the mean (in units of the model's scale) plus the Gaussian NLL of σ on detached residuals."""
+    """Error of the mean, relative and absolute, plus the Gaussian NLL of σ on detached residuals.
+
+    The paper's loss is the MSE of the eigenvalues; in 1/m² it is ruled by the top eigenvalues
+    (λ₂₀ of a part is ~100× its λ₁), and a model trained on it alone reached 33 % mean relative
+    error on validation (mae 9.8). Adding the squared error relative to each eigenvalue gave
+    14 % (mae 8.7) after three fine-tuning epochs of that model, so both terms are trained.
+    """
     scale = model.config.scale
     cases = [(model(pairs[0], pairs[1]), pairs[2])]
     if chains is not None:
@@ -65,7 +72,7 @@ def _losses(
     for (mean, sigma), truth in cases:
         residual = (mean - truth) / scale
         s = sigma / scale
-        total = total + residual.pow(2).mean()
+        total = total + residual.pow(2).mean() + ((mean - truth) / (truth + RELATIVE_FLOOR)).pow(2).mean()
         total = total + (torch.log(s) + 0.5 * (residual.detach() / s).pow(2)).mean()
     return total
 
