@@ -4,6 +4,7 @@ Each case is checked on the client's side (status, problem slug, how fast the an
 and on the pool's (the worker was replaced, the next upload is solved normally).
 """
 
+import asyncio
 import os
 import signal
 import threading
@@ -13,6 +14,7 @@ from pathlib import Path
 import anyio
 import pytest
 from fastapi.testclient import TestClient
+from threadpoolctl import threadpool_info
 
 from app.api.solver import SolverPool
 from app.geometry.pipeline import SpectrumOptions
@@ -46,13 +48,17 @@ def test_a_solve_past_its_deadline_is_stopped_and_answered_422(tmp_path):
         assert set(client.app.state.solver.worker_pids()).isdisjoint(before)
 
 
-def _idle_worker_address_space_mb() -> float:
-    """What a solver worker maps before it solves anything (numpy, scipy, BLAS buffers)."""
+def _warm_worker_address_space_mb() -> float:
+    """What a solver worker maps once it has solved a small shape (numpy, scipy, BLAS buffers).
+
+    OpenBLAS maps its ~64 MB work buffer at the first BLAS call, not at import.
+    """
 
     async def measure() -> float:
         pool = SolverPool(1, 0, 60, 0)
         await pool.start()
         try:
+            await pool.solve(SMALL, "ply", SpectrumOptions(k=5))
             status = Path(f"/proc/{pool.worker_pids()[0]}/status").read_text()
         finally:
             pool.close()
@@ -64,7 +70,7 @@ def _idle_worker_address_space_mb() -> float:
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads the worker's VmSize from /proc")
 def test_a_solve_over_the_memory_cap_is_answered_422_and_small_ones_still_fit(tmp_path):
-    cap = int(_idle_worker_address_space_mb()) + 120  # the small patch needs a few MB, the large grid ~300
+    cap = int(_warm_worker_address_space_mb()) + 120  # the small patch needs a few MB, the large grid ~300
     with client_for(tmp_path, solve_memory_mb=cap) as client:
         response = post(client, LARGE)
         assert response.status_code == 422, response.text
@@ -107,3 +113,19 @@ def test_a_worker_is_retired_after_its_quota_of_solves():
 
     first, later = anyio.run(pids_around_three_solves)
     assert set(first).isdisjoint(later)
+
+
+def test_workers_keep_blas_to_one_thread():
+    """A worker per core already fills the machine: a BLAS thread per core on top oversubscribes it."""
+
+    async def worker_blas_threads() -> list[int]:
+        pool = SolverPool(1, 0, 60, 0)
+        await pool.start()
+        try:
+            libraries = await asyncio.wrap_future(pool._pool.schedule(threadpool_info))
+        finally:
+            pool.close()
+        return [library["num_threads"] for library in libraries if library["user_api"] == "blas"]
+
+    threads = anyio.run(worker_blas_threads)
+    assert threads and set(threads) == {1}
