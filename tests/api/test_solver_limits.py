@@ -48,17 +48,13 @@ def test_a_solve_past_its_deadline_is_stopped_and_answered_422(tmp_path):
         assert set(client.app.state.solver.worker_pids()).isdisjoint(before)
 
 
-def _warm_worker_address_space_mb() -> float:
-    """What a solver worker maps once it has solved a small shape (numpy, scipy, BLAS buffers).
-
-    OpenBLAS maps its ~64 MB work buffer at the first BLAS call, not at import.
-    """
+def _idle_worker_address_space_mb() -> float:
+    """What a solver worker maps before it solves anything (numpy, scipy, BLAS buffers)."""
 
     async def measure() -> float:
         pool = SolverPool(1, 0, 60, 0)
         await pool.start()
         try:
-            await pool.solve(SMALL, "ply", SpectrumOptions(k=5))
             status = Path(f"/proc/{pool.worker_pids()[0]}/status").read_text()
         finally:
             pool.close()
@@ -70,7 +66,7 @@ def _warm_worker_address_space_mb() -> float:
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads the worker's VmSize from /proc")
 def test_a_solve_over_the_memory_cap_is_answered_422_and_small_ones_still_fit(tmp_path):
-    cap = int(_warm_worker_address_space_mb()) + 120  # the small patch needs a few MB, the large grid ~300
+    cap = int(_idle_worker_address_space_mb()) + 120  # the small patch needs a few MB, the large grid ~300
     with client_for(tmp_path, solve_memory_mb=cap) as client:
         response = post(client, LARGE)
         assert response.status_code == 422, response.text
