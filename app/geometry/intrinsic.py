@@ -14,7 +14,7 @@ the boundary), exactly as robust-laplacian does, so obtuse angles at the boundar
 the same way; the operators of the cover are halved at the end.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -34,6 +34,10 @@ class _Triangulation:
     faces: np.ndarray  # (m, 3) vertex indices
     twin: np.ndarray  # (3m,) opposite half-edge
     lengths: np.ndarray  # (3m,) intrinsic edge lengths
+    position: np.ndarray = field(init=False)  # (3m,) identity: scratch space of _flip
+
+    def __post_init__(self) -> None:
+        self.position = np.arange(len(self.twin))
 
 
 def intrinsic_delaunay_operators(
@@ -54,10 +58,8 @@ def intrinsic_delaunay_operators(
     triangulation = _half_edge_mesh(faces, lengths.reshape(-1))
     if triangulation is None or not _flip_to_delaunay(triangulation):
         return None
-    stiffness, mass = _operators(triangulation, len(vertices))
-    if len(triangulation.faces) > len(faces):  # the tufted cover counts every face twice
-        stiffness, mass = stiffness / 2, mass / 2
-    return stiffness, mass
+    tufted = len(triangulation.faces) > len(faces)  # the cover counts every face twice
+    return _operators(triangulation, len(vertices), 0.5 if tufted else 1.0)
 
 
 def _half_edge_mesh(faces: np.ndarray, lengths: np.ndarray) -> _Triangulation | None:
@@ -104,9 +106,13 @@ def _face_geometry(t: _Triangulation, faces: np.ndarray) -> tuple[np.ndarray, np
 
 def _cotangents(t: _Triangulation, faces: np.ndarray) -> np.ndarray:
     """(k, 3) cotangents of the angles facing half-edges 3 f, 3 f + 1, 3 f + 2 of each face."""
+    return _cotangents_and_areas(t, faces)[0]
+
+
+def _cotangents_and_areas(t: _Triangulation, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     lengths, area = _face_geometry(t, faces)
     squared = lengths**2
-    return (squared.sum(axis=1, keepdims=True) - 2 * squared) / (4 * area[:, None])
+    return (squared.sum(axis=1, keepdims=True) - 2 * squared) / (4 * area[:, None]), area
 
 
 def _cotangent_opposite(t: _Triangulation, half: np.ndarray) -> np.ndarray:
@@ -148,7 +154,11 @@ def _independent(edges: np.ndarray, twin: np.ndarray) -> np.ndarray:
 
 
 def _flip(t: _Triangulation, edges: np.ndarray) -> None:
-    """Flip each edge a–b of faces (a, b, c) and (b, a, d) to c–d: faces (c, a, d), (d, b, c)."""
+    """Flip each edge a–b of faces (a, b, c) and (b, a, d) to c–d: faces (c, a, d), (d, b, c).
+
+    Only the six half-edges of each flipped quad move, so only they and their twins are
+    rewritten: a whole-array remap per round cost more than the rest of the flip loop.
+    """
     h, o = edges, t.twin[edges]
     f1, f2 = h // 3, o // 3
     h_next, h_prev = 3 * f1 + (h + 1) % 3, 3 * f1 + (h + 2) % 3  # b→c, c→a
@@ -160,14 +170,16 @@ def _flip(t: _Triangulation, edges: np.ndarray) -> None:
     )
     old = np.concatenate([h_prev, o_next, h, o_prev, h_next, o])
     new = np.concatenate([3 * f1, 3 * f1 + 1, 3 * f1 + 2, 3 * f2, 3 * f2 + 1, 3 * f2 + 2])
-    remap = np.arange(len(t.twin))
-    remap[old] = new
-    twin = np.empty_like(t.twin)
-    twin[remap] = remap[t.twin]
-    lengths = t.lengths.copy()
-    lengths[new] = t.lengths[old]
-    lengths[3 * f1 + 2] = lengths[3 * f2 + 2] = new_length
-    t.twin, t.lengths = twin, lengths
+    moved_lengths = t.lengths[old]
+    # Where each moved half-edge's twin is now: moved itself (in this quad or another), or not.
+    position = t.position
+    position[old] = new
+    twins = position[t.twin[old]]
+    position[old] = old
+    t.twin[new] = twins
+    t.twin[twins] = new
+    t.lengths[new] = moved_lengths
+    t.lengths[3 * f1 + 2] = t.lengths[3 * f2 + 2] = new_length
     t.faces[f1] = np.column_stack([c, a, d])
     t.faces[f2] = np.column_stack([d, b, c])
 
@@ -187,19 +199,23 @@ def _heron(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(s * (s - x) * (s - y) * (s - z), 0.0))
 
 
-def _operators(t: _Triangulation, n: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    cotangent = _cotangents(t, np.arange(len(t.faces))).reshape(-1)
+def _operators(t: _Triangulation, n: int, scale: float) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """Stiffness and lumped mass, times ``scale``; assembled as one COO whose duplicates add up."""
+    cotangent, area = _cotangents_and_areas(t, np.arange(len(t.faces)))
+    cotangent = cotangent.reshape(-1)
     edges = np.flatnonzero(np.arange(len(t.twin)) < t.twin)
-    weight = (cotangent[edges] + cotangent[t.twin[edges]]) / 2
+    weight = scale * (cotangent[edges] + cotangent[t.twin[edges]]) / 2
     tails = t.faces.reshape(-1)[edges]
-    heads = np.roll(t.faces, -1, axis=1).reshape(-1)[edges]
+    heads = t.faces[:, [1, 2, 0]].reshape(-1)[edges]
     # Loop edges (tail == head, from flips in the tufted cover) add and remove the same weight.
     degree = np.bincount(tails, weight, minlength=n) + np.bincount(heads, weight, minlength=n)
-    off_diagonal = sp.coo_matrix(
-        (np.concatenate([-weight, -weight]), (np.concatenate([tails, heads]), np.concatenate([heads, tails]))),
+    diagonal = np.arange(n)
+    stiffness = sp.coo_matrix(
+        (
+            np.concatenate([-weight, -weight, degree]),
+            (np.concatenate([tails, heads, diagonal]), np.concatenate([heads, tails, diagonal])),
+        ),
         shape=(n, n),
-    )
-    stiffness = (off_diagonal + sp.diags(degree)).tocsr()
-    _, area = _face_geometry(t, np.arange(len(t.faces)))
-    lumped = np.bincount(t.faces.reshape(-1), weights=np.repeat(area / 3, 3), minlength=n)
+    ).tocsr()
+    lumped = np.bincount(t.faces.reshape(-1), weights=np.repeat(scale * area / 3, 3), minlength=n)
     return stiffness, sp.diags(lumped).tocsr()

@@ -1,0 +1,75 @@
+"""The combinatorial helpers against brute-force counts on random and hand-made meshes."""
+
+from collections import Counter
+
+import numpy as np
+import pytest
+import trimesh
+
+from app.geometry.topology import drop_unreferenced, edge_face_counts, half_edges, largest_component
+from app.geometry.validate import _merge_duplicate_vertices
+
+
+def _random_faces(rng: np.random.Generator, vertices: int, faces: int) -> np.ndarray:
+    """Triangles with three distinct corners, edges shared by any number of faces."""
+    return np.array([rng.choice(vertices, 3, replace=False) for _ in range(faces)])
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_edge_face_counts_match_a_counter(seed):
+    faces = _random_faces(np.random.default_rng(seed), vertices=12, faces=40)
+    half = half_edges(faces)
+    counts = Counter(frozenset(edge) for edge in half.tolist())
+    expected = [counts[frozenset(edge)] for edge in half.tolist()]
+    np.testing.assert_array_equal(edge_face_counts(half), expected)
+
+
+def test_a_closed_surface_has_two_faces_on_every_edge():
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    assert np.all(edge_face_counts(half_edges(sphere.faces)) == 2)
+
+
+def test_drop_unreferenced_keeps_every_face_on_its_coordinates():
+    rng = np.random.default_rng(0)
+    vertices = rng.standard_normal((30, 3))
+    faces = _random_faces(rng, 30, 8)
+    kept, renumbered = drop_unreferenced(vertices, faces)
+    assert len(kept) == len(np.unique(faces))
+    np.testing.assert_array_equal(kept[renumbered], vertices[faces])
+
+
+def test_drop_unreferenced_leaves_a_fully_used_mesh_alone():
+    sphere = trimesh.creation.icosphere(subdivisions=1)
+    kept, renumbered = drop_unreferenced(sphere.vertices, sphere.faces)
+    assert kept is sphere.vertices and renumbered is sphere.faces
+
+
+def test_duplicate_vertices_merge_without_moving_any_face():
+    sphere = trimesh.creation.icosphere(subdivisions=1)
+    # Every face gets its own three vertices, as in STL, then the vertex order is shuffled.
+    soup = sphere.vertices[sphere.faces].reshape(-1, 3)
+    order = np.random.default_rng(1).permutation(len(soup))
+    position = np.empty_like(order)
+    position[order] = np.arange(len(order))
+    vertices, faces = soup[order], position[np.arange(len(soup)).reshape(-1, 3)]
+    merged, merged_faces = _merge_duplicate_vertices(vertices, faces)
+    assert len(merged) == len(sphere.vertices)
+    np.testing.assert_array_equal(merged[merged_faces], vertices[faces])
+
+
+def test_a_mesh_without_duplicates_keeps_its_vertex_order():
+    sphere = trimesh.creation.icosphere(subdivisions=1)
+    merged, faces = _merge_duplicate_vertices(sphere.vertices, sphere.faces)
+    assert merged is sphere.vertices and faces is sphere.faces
+
+
+def test_largest_component_is_by_area_and_one_component_is_returned_whole():
+    big = trimesh.creation.icosphere(subdivisions=2)
+    small = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
+    vertices = np.concatenate([small.vertices, big.vertices])
+    faces = np.concatenate([small.faces, big.faces + len(small.vertices)])
+    kept, dropped = largest_component(vertices, faces)
+    assert dropped == 1
+    np.testing.assert_array_equal(kept, big.faces + len(small.vertices))
+    alone, none_dropped = largest_component(big.vertices, big.faces)
+    assert none_dropped == 0 and alone is big.faces
