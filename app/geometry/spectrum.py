@@ -29,7 +29,11 @@ ARPACK_TOL = 0.0
 
 def shift_for(mass: sp.spmatrix) -> float:
     """The shift σ used for the shape with lumped mass ``mass`` (1/m²)."""
-    return -RELATIVE_SHIFT / float(mass.diagonal().sum())
+    return _shift(mass.diagonal())
+
+
+def _shift(lumped_mass: np.ndarray) -> float:
+    return -RELATIVE_SHIFT / float(lumped_mass.sum())
 
 
 def eigenvalues(operators: Operators, k: int, fixed: np.ndarray | None = None) -> np.ndarray:
@@ -65,19 +69,19 @@ def eigenpairs(
         When the factorization or ARPACK fails (a pathological shape).
     """
     stiffness, mass = operators
+    diagonal = mass.diagonal()
     if fixed is not None:
         free = np.flatnonzero(~fixed)
         stiffness = stiffness[free][:, free]
-        mass = mass[free][:, free]
-    diagonal = mass.diagonal()
+        diagonal = diagonal[free]
     if diagonal.min() <= 0:
         raise SolverFailure("a vertex has no area (zero lumped mass)")
     n = len(diagonal)
     if not 1 <= k < n:
         raise SolverFailure(f"k must lie in [1, {n - 1}] for {n} free vertices, got {k}")
-    inv_sqrt = sp.diags(1 / np.sqrt(diagonal))
-    standard = (inv_sqrt @ stiffness @ inv_sqrt).tocsc()
-    sigma = shift_for(mass)
+    inverse_root = 1 / np.sqrt(diagonal)
+    standard = _symmetric_scaling(stiffness.tocsr(), inverse_root).tocsc()
+    sigma = _shift(diagonal)
     shifted = (standard - sigma * sp.identity(n, format="csc")).tocsc()
     try:
         factor = qdldl.Solver(shifted)
@@ -100,4 +104,11 @@ def eigenpairs(
     values, standard_vectors = result
     order = np.argsort(values)
     # x = M^-1/2 y turns orthonormal eigenvectors of C into M-orthonormal ones of (S, M).
-    return values[order], inv_sqrt @ standard_vectors[:, order]
+    return values[order], inverse_root[:, None] * standard_vectors[:, order]
+
+
+def _symmetric_scaling(matrix: sp.csr_matrix, scale: np.ndarray) -> sp.csr_matrix:
+    """D A D for D = diag(scale), by scaling the stored entries (two sparse products cost 5x more)."""
+    rows = np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))
+    data = matrix.data * scale[rows] * scale[matrix.indices]
+    return sp.csr_matrix((data, matrix.indices, matrix.indptr), shape=matrix.shape)

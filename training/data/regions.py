@@ -87,7 +87,8 @@ class RegionSampler:
             if not mask.any():
                 break
             centre = rng.choice(np.flatnonzero(mask))
-            mask &= self.distances_from(int(centre)) > rng.uniform(0.03, 0.09)
+            radius = rng.uniform(0.03, 0.09)
+            mask &= self.distances_from(int(centre), limit=radius) > radius
         return mask
 
     def smooth_field(self, rng: np.random.Generator) -> np.ndarray:
@@ -143,9 +144,10 @@ class RegionSampler:
         weights = self.vertex_area * mask
         return float(weights[self.template.vertices[:, 0] > 0].sum() / max(weights.sum(), 1e-12))
 
-    def distances_from(self, vertex: int) -> np.ndarray:
-        """Edge-path distance (m) on the template from one vertex: a cheap geodesic proxy."""
-        return dijkstra(self.graph, indices=vertex)
+    def distances_from(self, vertex: int, limit: float = np.inf) -> np.ndarray:
+        """Edge-path distance (m) on the template from one vertex (a cheap geodesic proxy); inf
+        beyond ``limit``, where the search stops (a small hole then costs a small search)."""
+        return dijkstra(self.graph, indices=vertex, limit=limit)
 
     def distances_from_set(self, vertices: np.ndarray, limit: float = np.inf) -> np.ndarray:
         """Edge-path distance (m) to the nearest of ``vertices``; inf beyond ``limit``."""

@@ -1,0 +1,53 @@
+"""Speed of the data build's spectra stage, measured on a sample of a built data set's own tasks.
+
+Run: ``.venv/bin/python benchmarks/bench_build_spectra.py --data data/standard --tasks 2000``
+(needs a built data set: ``make dataset``). A uniform sample of the build's distinct
+(shape, mask, variant) tasks goes through the build's own worker function on the build's own
+process pool, chunked as the build chunks them, so the wall time per task is what the full
+stage pays per task on this machine; the stage time is projected from it. The sample's
+spectra are compared with the data set's stored ones, so a speed-up that changes a spectrum
+shows here.
+"""
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from training.data.build import _chunks, run_tasks, solve_chunk
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=Path("data/standard"))
+    parser.add_argument("--tasks", type=int, default=2000)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+
+    preset = json.loads((args.data / "manifest.json").read_text())["preset"]
+    arrays = np.load(args.data / "dataset.npz")
+    tasks = np.stack([arrays["spectrum_shape"], arrays["spectrum_mask"]], axis=1)
+    variants, stored = arrays["spectrum_variant"], arrays["spectra"]
+    sample = np.sort(np.random.default_rng(args.seed).choice(len(tasks), size=args.tasks, replace=False))
+    chunks = list(_chunks(sample, preset["chunk"]))
+    paths = (str(args.data / "template"), str(args.data / "work/shapes.npy"), str(args.data / "work/masks.npy"))
+    arguments = [(*paths, tasks[c], variants[c], preset["k"]) for c in chunks]
+    results: dict[int, np.ndarray] = {}
+    started = time.perf_counter()
+    run_tasks(solve_chunk, arguments, results.__setitem__, None, args.workers, "spectra")
+    seconds = time.perf_counter() - started
+    computed = np.concatenate([results[i] for i in range(len(chunks))])
+    expected = stored[sample]
+    deviation = np.nanmax(np.abs(computed - expected) / np.maximum(np.abs(expected), 1e-9))
+    per_task = seconds / args.tasks
+    print(f"{args.tasks} of {len(tasks)} tasks on {args.workers} workers: {seconds:.1f} s wall")
+    print(f"{1e3 * per_task:.1f} ms wall per task, {1e3 * per_task * args.workers:.1f} worker-ms per task")
+    print(f"projected spectra stage: {per_task * len(tasks) / 60:.1f} min")
+    print(f"largest relative deviation from the stored spectra: {deviation:.1e}")
+
+
+if __name__ == "__main__":
+    main()
