@@ -1,4 +1,4 @@
-"""The union operator and localizer in PyTorch: commutativity, monotone output, size (needs torch)."""
+"""The union operator and localizer in PyTorch: commutativity, scale equivariance, monotone output, size."""
 
 import numpy as np
 import pytest
@@ -29,12 +29,28 @@ def test_union_is_exactly_commutative_and_non_decreasing():
     assert (torch.diff(ab, dim=1) >= 0).all() and (ab >= 0).all() and (sigma_ab > 0).all()
 
 
-def test_union_sees_absolute_size():
-    """No per-shape normalisation: scaling both inputs must not leave the output unchanged."""
+@pytest.mark.parametrize("factor", [0.01, 0.25, 3.0, 1e4])
+def test_union_is_scale_equivariant(factor):
+    """A body scaled by s has every eigenvalue scaled by 1/s², its unions' included."""
     model = UnionOperator(UnionConfig()).eval()
-    a, b = spectra(8, 3), spectra(8, 4)
+    a, b = spectra(16, 3), spectra(16, 4)
     with torch.no_grad():
-        assert not torch.allclose(model(a, b)[0], model(a * 3, b * 3)[0])
+        union, sigma = model(a, b)
+        scaled_union, scaled_sigma = model(a * factor, b * factor)
+    torch.testing.assert_close(scaled_union, union * factor, rtol=1e-5, atol=0)
+    torch.testing.assert_close(scaled_sigma, sigma * factor, rtol=1e-5, atol=0)
+
+
+def test_union_keeps_the_relative_size_of_the_parts():
+    """The common scale is shared by both operands, never one per part: a bigger second part
+    (same shape of spectrum) is a different union, not the same one rescaled."""
+    model = UnionOperator(UnionConfig()).eval()
+    a, b = spectra(16, 5), spectra(16, 6)
+    with torch.no_grad():
+        union = model(a, b)[0]
+        bigger_b = model(a, b / 3)[0]
+    ratio = bigger_b / union
+    assert not torch.allclose(ratio, ratio[:, :1].expand_as(ratio), rtol=1e-3)
 
 
 def test_localizer_basis_head_is_small_and_maps_to_vertices():

@@ -46,6 +46,8 @@ def test_exported_union_commutes_and_is_non_decreasing(trained):
     ba, _ = union.run(None, {"spectrum_a": b, "spectrum_b": a})
     assert np.max(np.abs(ab - ba)) <= 1e-6
     assert (np.diff(ab, axis=1) >= 0).all() and (sigma > 0).all()
+    scaled, _ = union.run(None, {"spectrum_a": 4 * a, "spectrum_b": 4 * b})
+    np.testing.assert_allclose(scaled, 4 * ab, rtol=1e-5)
 
 
 def test_the_exported_folder_is_what_the_service_loads(trained):

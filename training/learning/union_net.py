@@ -12,8 +12,13 @@ eigenvalues that are non-decreasing by construction. A second linear head gives 
 log standard deviation, trained on the residuals of the first (the mean never sees its
 gradient) and scaled on validation data so that the stated intervals cover what they claim.
 
-Eigenvalues stay in 1/m² in and out: the operator must see absolute part sizes. A fixed
-constant ``scale`` brings them near 1 inside the network; nothing is normalised per shape.
+Eigenvalues stay in 1/m² in and out, and both operands are divided by one common scale, the
+mean of all 2k input eigenvalues, so the network sees the two parts' sizes relative to each
+other (never each part normalised on its own) and the output is multiplied back by it. This
+makes the operator exactly scale-equivariant, as the true union is: a body scaled by c has
+every eigenvalue, the union's included, scaled by 1/c². With a fixed scale of 100 1/m² the
+same network, trained the same way, did as well on bodies the size of its training set
+(validation mre 13.7 % both) but not beyond: children Test A mre 43.8 % against 15.1 %.
 """
 
 from dataclasses import asdict, dataclass
@@ -32,7 +37,7 @@ class UnionConfig:
     decoder_layers: int = 3
     decoder_ff: int = 32
     dropout: float = 0.1
-    scale: float = 100.0  # 1/m²: offsets of a body part are tens to hundreds
+    scale: float = 100.0  # 1/m²: the loss's unit (offsets of a body part are tens to hundreds)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -65,9 +70,14 @@ class UnionOperator(nn.Module):
         # Interval calibration factor, fitted on validation data after training.
         self.register_buffer("sigma_scale", torch.ones(()))
 
-    def tokens(self, spectrum: torch.Tensor) -> torch.Tensor:
+    @staticmethod
+    def common_scale(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+        """(B, 1): the mean eigenvalue of both operands, symmetric in them."""
+        return torch.clamp((a.mean(-1, keepdim=True) + b.mean(-1, keepdim=True)) / 2, min=1e-6)
+
+    def tokens(self, spectrum: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
         """(B, k) eigenvalues → (B, k, width): [θₐⁱ, off·θ_b, off] per the paper."""
-        off = (offsets(spectrum) / self.config.scale).unsqueeze(-1)
+        off = (offsets(spectrum) / scale).unsqueeze(-1)
         position = self.position.expand(spectrum.shape[0], -1, -1)
         return torch.cat([position, self.value(off), off], dim=-1)
 
@@ -75,10 +85,11 @@ class UnionOperator(nn.Module):
         k = self.config.k
         first = (a.sum(-1, keepdim=True) <= b.sum(-1, keepdim=True)).to(a.dtype)
         a, b = first * a + (1 - first) * b, first * b + (1 - first) * a
-        informed = self.encoder(torch.cat([self.tokens(a), self.tokens(b)], dim=1))
+        scale = self.common_scale(a, b)
+        informed = self.encoder(torch.cat([self.tokens(a, scale), self.tokens(b, scale)], dim=1))
         latent = informed[:, :k] + informed[:, k:]
         decoded = self.decoder(latent)
-        steps = nn.functional.softplus(self.rho(decoded).squeeze(-1)) * self.config.scale
+        steps = nn.functional.softplus(self.rho(decoded).squeeze(-1)) * scale
         union = torch.cumsum(steps, dim=-1)
-        sigma = torch.exp(self.log_sigma(decoded).squeeze(-1)) * self.config.scale * self.sigma_scale
+        sigma = torch.exp(self.log_sigma(decoded).squeeze(-1)) * scale * self.sigma_scale
         return union, sigma
