@@ -38,10 +38,12 @@ def test_drop_unreferenced_keeps_every_face_on_its_coordinates():
     np.testing.assert_array_equal(kept[renumbered], vertices[faces])
 
 
-def test_drop_unreferenced_leaves_a_fully_used_mesh_alone():
+@pytest.mark.parametrize("clean", [drop_unreferenced, _merge_duplicate_vertices])
+def test_a_clean_mesh_comes_back_as_it_was(clean):
+    """No unused and no duplicate vertex: the same arrays, in their own vertex order."""
     sphere = trimesh.creation.icosphere(subdivisions=1)
-    kept, renumbered = drop_unreferenced(sphere.vertices, sphere.faces)
-    assert kept is sphere.vertices and renumbered is sphere.faces
+    vertices, faces = clean(sphere.vertices, sphere.faces)
+    assert vertices is sphere.vertices and faces is sphere.faces
 
 
 def test_duplicate_vertices_merge_without_moving_any_face():
@@ -55,12 +57,6 @@ def test_duplicate_vertices_merge_without_moving_any_face():
     merged, merged_faces = _merge_duplicate_vertices(vertices, faces)
     assert len(merged) == len(sphere.vertices)
     np.testing.assert_array_equal(merged[merged_faces], vertices[faces])
-
-
-def test_a_mesh_without_duplicates_keeps_its_vertex_order():
-    sphere = trimesh.creation.icosphere(subdivisions=1)
-    merged, faces = _merge_duplicate_vertices(sphere.vertices, sphere.faces)
-    assert merged is sphere.vertices and faces is sphere.faces
 
 
 def test_largest_component_is_by_area_and_one_component_is_returned_whole():
