@@ -1,5 +1,6 @@
 """The data set build on a synthetic body (no anny needed): determinism, masks, rules, splits."""
 
+import dataclasses
 import shutil
 
 import numpy as np
@@ -139,6 +140,19 @@ def test_a_killed_build_resumes_without_recomputing_finished_chunks(built, data,
     build_dataset(SyntheticSource(), PRESET, copy, seed=0, workers=1)
     assert all(path.stat().st_mtime_ns == mtime for path, mtime in finished.items())
     np.testing.assert_array_equal(np.load(copy / "dataset.npz")["spectra"], data["spectra"])
+
+
+def test_a_build_resumed_over_a_larger_preset_equals_a_fresh_one(built, data, tmp_path):
+    """Mask chunks of a preset that drew more (here retrieval pairs) hold this preset's draws first."""
+    larger = dataclasses.replace(PRESET, retrieval_pairs=PRESET.retrieval_pairs + 3)
+    build_dataset(SyntheticSource(), larger, tmp_path, seed=0, workers=1)
+    assert (np.load(tmp_path / "dataset.npz")["split"] == "retrieval").sum() == larger.retrieval_pairs
+    (tmp_path / "dataset.npz").unlink()
+    build_dataset(SyntheticSource(), PRESET, tmp_path, seed=0, workers=1)
+    resumed = np.load(tmp_path / "dataset.npz")
+    for key in ("split", "shape_a", "shape_b", "spectra"):
+        np.testing.assert_array_equal(resumed[key], data[key], err_msg=key)
+    np.testing.assert_array_equal(resumed["masks"][resumed["mask_a"]], data["masks"][data["mask_a"]])
 
 
 def test_dask_cluster_builds_the_same_data(data, tmp_path):

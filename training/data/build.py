@@ -93,7 +93,7 @@ PRESETS = {
         triples=1_000,
         cloud_parts=100,
         chunk=64,
-        retrieval_pairs=4_000,
+        retrieval_pairs=1_000,
     ),
     "large": Preset(
         "large",
@@ -297,7 +297,7 @@ def _stage_masks(
     results: dict[str, dict[str, np.ndarray]] = {}
     for kind, total in plan.items():
         counts = [min(preset.chunk, total - start) for start in range(0, total, preset.chunk)]
-        missing = [i for i in range(len(counts)) if not layout.chunk(kind, i).exists()]
+        missing = [i for i in range(len(counts)) if _chunk_rows(layout.chunk(kind, i)) < counts[i]]
 
         def save(index: int, result: dict, kind: str = kind, missing: list[int] = missing) -> None:
             np.savez(layout.chunk(kind, missing[index]), **result)
@@ -310,9 +310,22 @@ def _stage_masks(
             workers,
             f"masks ({kind})",
         )
+        # A chunk's draws are a prefix of one stream: a chunk saved by a preset that drew more
+        # from it holds this preset's draws first.
         parts = [np.load(layout.chunk(kind, i)) for i in range(len(counts))]
-        results[kind] = {key: np.concatenate([p[key] for p in parts]) for key in ("masks", "scenario")}
+        results[kind] = {
+            key: np.concatenate([p[key][:count] for p, count in zip(parts, counts, strict=True)])
+            for key in ("masks", "scenario")
+        }
     return {kind: results[kind] for kind in ("pair", "candidate", "retrieval")}, results["triple"]
+
+
+def _chunk_rows(path: Path) -> int:
+    """Draws saved in a mask chunk; 0 for none yet."""
+    if not path.exists():
+        return 0
+    with np.load(path) as chunk:
+        return len(chunk["scenario"])
 
 
 def _stage_splits(
