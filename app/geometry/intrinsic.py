@@ -116,8 +116,10 @@ def _cotangents_and_areas(t: _Triangulation, faces: np.ndarray) -> tuple[np.ndar
 
 
 def _cotangent_opposite(t: _Triangulation, half: np.ndarray) -> np.ndarray:
-    """cot of the angle facing each half-edge in its face."""
-    return _cotangents(t, half // 3)[np.arange(len(half)), half % 3]
+    """cot of the angle facing each half-edge in its face (only that one of the face's three)."""
+    lengths, area = _face_geometry(t, half // 3)
+    squared = lengths**2
+    return (squared.sum(axis=1) - 2 * squared[np.arange(len(half)), half % 3]) / (4 * area)
 
 
 def _flip_to_delaunay(t: _Triangulation) -> bool:
@@ -130,27 +132,28 @@ def _flip_to_delaunay(t: _Triangulation) -> bool:
         if bad.size == 0:
             return True
         bad = bad[np.argsort(weight[weight < -DELAUNAY_TOLERANCE])]
-        flipped = _independent(bad, t.twin)
+        chosen = _independent(bad, t.twin)
+        flipped = bad[chosen]
         if flipped.size == 0:
             return False  # only edges glued to their own face are left: not ours to flip
         touched = np.concatenate([flipped // 3, t.twin[flipped] // 3])
         _flip(t, flipped)
         around = (3 * touched[:, None] + np.arange(3)).reshape(-1)
-        pending = np.concatenate([around, np.setdiff1d(bad, flipped)])
+        pending = np.concatenate([around, bad[~chosen]])
         candidates = np.unique(np.minimum(pending, t.twin[pending]))
         weight = _cotangent_opposite(t, candidates) + _cotangent_opposite(t, t.twin[candidates])
     return False
 
 
 def _independent(edges: np.ndarray, twin: np.ndarray) -> np.ndarray:
-    """A subset of ``edges`` (ranked by priority) in which no two share a face."""
+    """Which of ``edges`` (ranked by priority) to flip together: a mask, no two sharing a face."""
     faces = np.concatenate([edges // 3, twin[edges] // 3])
     rank = np.tile(np.arange(len(edges)), 2)
     first = np.full(int(faces.max()) + 1, len(edges))
     np.minimum.at(first, faces, rank)
     own = np.arange(len(edges))
     keep = (first[edges // 3] == own) & (first[twin[edges] // 3] == own)
-    return edges[keep & (edges // 3 != twin[edges] // 3)]
+    return keep & (edges // 3 != twin[edges] // 3)
 
 
 def _flip(t: _Triangulation, edges: np.ndarray) -> None:
