@@ -39,8 +39,13 @@ def boundary_half_edges(faces: np.ndarray) -> np.ndarray:
 
 def boundary_vertex_mask(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """True for vertices on an edge that only one face uses (the Dirichlet boundary)."""
+    return vertices_of(boundary_half_edges(faces), n_vertices)
+
+
+def vertices_of(edges: np.ndarray, n_vertices: int) -> np.ndarray:
+    """True for the vertices that ``edges`` (h, 2) touch."""
     mask = np.zeros(n_vertices, dtype=bool)
-    mask[boundary_half_edges(faces).reshape(-1)] = True
+    mask[edges.reshape(-1)] = True
     return mask
 
 
@@ -73,13 +78,12 @@ def drop_unreferenced(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarr
     return vertices[used], (np.cumsum(used) - 1)[faces]
 
 
-def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
-    """Closed boundary loops as vertex sequences following the boundary half-edges.
+def boundary_loops(half: np.ndarray) -> list[np.ndarray]:
+    """Closed loops as vertex sequences following boundary half-edges (from :func:`boundary_half_edges`).
 
     Loops through a pinched vertex (two outgoing boundary edges) are ambiguous and left out,
     so callers never modify a boundary they cannot trace unambiguously.
     """
-    half = boundary_half_edges(faces)
     starts, counts = np.unique(half[:, 0], return_counts=True)
     pinched = set(starts[counts > 1].tolist())
     successor = {int(a): int(b) for a, b in half if a not in pinched}
@@ -107,7 +111,11 @@ def cap_faces(loop: np.ndarray, centre: int) -> np.ndarray:
 
 
 def fill_small_holes(
-    vertices: np.ndarray, faces: np.ndarray, max_edges: int, max_relative_perimeter: float = 0.2
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    boundary: np.ndarray,
+    max_edges: int,
+    max_relative_perimeter: float = 0.2,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Cap short boundary loops (scanner pin-holes) with a centroid fan.
 
@@ -115,11 +123,12 @@ def fill_small_holes(
     the spectrum far beyond what the shape warrants. A loop is a pin-hole when it has at most
     ``max_edges`` edges *and* its perimeter is under ``max_relative_perimeter`` times the square
     root of the surface area: the second test keeps a coarse but genuine partial surface (a
-    hexagonal patch) from being closed up.
+    hexagonal patch) from being closed up. ``boundary`` holds the mesh's boundary half-edges
+    (from :func:`boundary_half_edges`): the caller needs them again, so they are found once.
 
     Returns the new vertices, the new faces and the number of holes filled.
     """
-    short = [loop for loop in boundary_loops(faces) if len(loop) <= max_edges] if max_edges >= 3 else []
+    short = [loop for loop in boundary_loops(boundary) if len(loop) <= max_edges] if max_edges >= 3 else []
     if not short:
         return vertices, faces, 0
     scale = np.sqrt(face_areas(vertices, faces).sum())

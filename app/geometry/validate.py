@@ -12,11 +12,12 @@ import numpy as np
 from app.geometry.errors import InvalidGeometry, MissingBoundary
 from app.geometry.shapes import Mesh, PointCloud
 from app.geometry.topology import (
-    boundary_vertex_mask,
+    boundary_half_edges,
     drop_unreferenced,
     face_areas,
     fill_small_holes,
     largest_component,
+    vertices_of,
 )
 
 
@@ -68,8 +69,9 @@ def prepare_mesh(mesh: Mesh, *, k: int, max_hole_edges: int) -> PreparedMesh:
         raise InvalidGeometry("the faces have zero total area")
     faces, dropped = largest_component(vertices, faces)
     vertices, faces = drop_unreferenced(vertices, faces)
-    vertices, faces, filled = fill_small_holes(vertices, faces, max_hole_edges)
-    boundary = boundary_vertex_mask(faces, len(vertices))
+    edges = boundary_half_edges(faces)
+    vertices, faces, filled = fill_small_holes(vertices, faces, edges, max_hole_edges)
+    boundary = vertices_of(boundary_half_edges(faces) if filled else edges, len(vertices))
     _require_room_for(k, int(np.count_nonzero(~boundary)))
     return PreparedMesh(Mesh(vertices, faces), boundary, dropped, filled)
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.geometry.topology import boundary_loops, cap_faces
+from app.geometry.topology import boundary_half_edges, boundary_loops, cap_faces
 from app.inference.template import PART_NAMES, SIDED_PARTS, Template
 
 TOPOLOGY = "anny-noeyes-notongue"
@@ -66,7 +66,7 @@ def capped_topology(model) -> CappedTopology:
     faces = faces[~inside[faces].all(axis=1)]
     kept, faces = np.unique(faces, return_inverse=True)
     faces = faces.reshape(-1, 3)
-    loops = boundary_loops(faces)
+    loops = boundary_loops(boundary_half_edges(faces))
     fans = [cap_faces(loop, len(kept) + number) for number, loop in enumerate(loops)]
     return CappedTopology(kept, np.concatenate([faces, *fans]), tuple(loops))
 
