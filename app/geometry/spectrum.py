@@ -126,6 +126,8 @@ def _shifted_upper(stiffness: sp.csr_matrix, free: np.ndarray, scale: np.ndarray
     n = len(scale)
     pointers = np.r_[0, np.cumsum(np.bincount(rows, minlength=n))]
     upper = sp.csc_matrix((data, columns, pointers), shape=(n, n))
-    if np.count_nonzero(on_diagonal) < n:  # a vertex without a stored diagonal entry
-        upper = (upper - sigma * sp.diags(~np.isin(np.arange(n), rows[on_diagonal]))).tocsc()
+    unshifted = np.ones(n, dtype=bool)  # rows without a stored diagonal entry (isolated vertices)
+    unshifted[rows[on_diagonal]] = False
+    if unshifted.any():
+        upper = (upper - sigma * sp.diags(unshifted.astype(np.float64))).tocsc()
     return upper

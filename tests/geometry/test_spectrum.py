@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+import scipy.linalg
+import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
 from app.geometry.errors import SolverFailure
@@ -50,6 +52,39 @@ def test_agrees_with_plain_scipy_solve_of_the_same_matrices(patch):
     mass = operators.mass[free][:, free]
     reference = np.sort(sla.eigsh(stiffness, 20, mass, sigma=shift_for(mass))[0])
     np.testing.assert_allclose(eigenvalues(operators, 20, fixed), reference, rtol=1e-8)
+
+
+def test_any_symmetric_stiffness_layout_gives_the_dense_pencil_spectrum():
+    """Duplicate stored entries and vertices without a stored diagonal entry (an isolated vertex
+    of the stiffness graph) are what the one-pass assembly of the shifted system must not miss."""
+    rng = np.random.default_rng(3)
+    n = 40
+    tails, heads = rng.integers(0, n - 5, 120), rng.integers(0, n - 5, 120)  # the last 5 isolated
+    weights = rng.uniform(0.5, 2.0, 120)
+    laplacian = sp.coo_matrix(
+        (
+            np.r_[-weights, -weights, weights, weights],
+            (np.r_[tails, heads, tails, heads], np.r_[heads, tails, tails, heads]),
+        ),
+        shape=(n, n),
+    )
+    stiffness = sp.csr_matrix((laplacian.data, (laplacian.row, laplacian.col)), shape=(n, n))
+    stiffness.eliminate_zeros()  # loops (tail == head) cancel; their rows keep no diagonal entry
+    duplicated = sp.csr_matrix(  # the same matrix, every entry stored as two halves
+        (np.repeat(stiffness.data / 2, 2), np.repeat(stiffness.indices, 2), 2 * stiffness.indptr), shape=(n, n)
+    )
+    assert not duplicated.has_canonical_format
+    assert np.count_nonzero(stiffness.diagonal()) < n
+    mass = sp.diags(rng.uniform(0.5, 1.5, n)).tocsr()
+    fixed = np.zeros(n, bool)
+    fixed[[0, 7, n - 1]] = True
+    free = np.flatnonzero(~fixed)
+    reference = scipy.linalg.eigh(stiffness.toarray()[np.ix_(free, free)], mass.toarray()[np.ix_(free, free)])[0]
+    for matrix in (stiffness, duplicated):
+        np.testing.assert_allclose(eigenvalues((matrix, mass), 10, fixed), reference[:10], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(
+        eigenvalues((duplicated, mass), 10), scipy.linalg.eigh(stiffness.toarray(), mass.toarray())[0][:10], atol=1e-9
+    )
 
 
 def test_rigid_motion_and_reordering_leave_the_spectrum_unchanged(patch):
