@@ -1,4 +1,5 @@
-"""The union operator and localizer in PyTorch: commutativity, scale equivariance, monotone output, size."""
+"""The union operator and localizer in PyTorch: commutativity, scale equivariance, monotone output,
+the retrieval prior, size."""
 
 import numpy as np
 import pytest
@@ -6,7 +7,13 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from training.learning.localizer_net import Localizer, LocalizerConfig, feature_statistics  # noqa: E402
-from training.learning.union_net import UnionConfig, UnionOperator, offsets  # noqa: E402
+from training.learning.union_net import (  # noqa: E402
+    UnionConfig,
+    UnionMemory,
+    UnionOperator,
+    common_scale,
+    relative_log,
+)
 
 
 def spectra(count: int, seed: int) -> torch.Tensor:
@@ -14,13 +21,54 @@ def spectra(count: int, seed: int) -> torch.Tensor:
     return torch.cumsum(torch.rand(count, 20, generator=generator) * 40, dim=1)
 
 
-def test_offsets_invert_to_the_spectrum():
-    x = spectra(4, 0)
-    torch.testing.assert_close(torch.cumsum(offsets(x), dim=1), x)
+def operator(seed: int = 0, stored: int = 50) -> UnionOperator:
+    """An operator with random weights (the head's last layer too) over a random memory."""
+    memory = UnionMemory(spectra(stored, 100 + seed), spectra(stored, 200 + seed), spectra(stored, 300 + seed) / 2)
+    model = UnionOperator(UnionConfig(), memory)
+    torch.manual_seed(seed)
+    torch.nn.init.normal_(model.head[-1].weight, std=0.05)
+    return model.eval()
+
+
+def relative_logs(a: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    scale = common_scale(a, b)
+    return relative_log(a, scale), relative_log(b, scale)
+
+
+def test_memory_finds_a_stored_pair_in_either_order_and_at_any_scale():
+    a, b, union = spectra(30, 10), spectra(30, 11), spectra(30, 12)
+    memory = UnionMemory(a, b, union)
+    for factor in (1.0, 0.05, 40.0):
+        for first, second in ((a, b), (b, a)):
+            prior = memory(*relative_logs(first * factor, second * factor))
+            scale = common_scale(first * factor, second * factor)
+            torch.testing.assert_close(prior * scale, union * factor, rtol=1e-5, atol=0)
+
+
+def test_memory_hides_the_excluded_row():
+    """With its own row hidden, a stored pair gets the union of the nearest other pair."""
+    a, b, union = spectra(30, 13), spectra(30, 14), spectra(30, 15)
+    memory = UnionMemory(a, b, union)
+    za, zb = relative_logs(a, b)
+    prior = memory(za, zb, torch.arange(30))
+    keys = torch.cat([za, zb], 1)
+    distance = torch.cdist(keys, memory.keys).fill_diagonal_(torch.inf)
+    swapped = torch.cdist(torch.cat([zb, za], 1), memory.keys).fill_diagonal_(torch.inf)
+    nearest = torch.minimum(distance, swapped).argmin(1)
+    torch.testing.assert_close(prior, memory.unions[nearest])
+
+
+def test_an_untrained_operator_returns_the_prior():
+    """The head starts at zero: before training, the operator is the nearest-pair lookup."""
+    a, b, union = spectra(30, 16), spectra(30, 17), spectra(30, 18)
+    model = UnionOperator(UnionConfig(), UnionMemory(a, b, union)).eval()
+    with torch.no_grad():
+        predicted, _ = model(b * 3, a * 3)
+    torch.testing.assert_close(predicted, union * 3, rtol=1e-4, atol=1e-3)
 
 
 def test_union_is_exactly_commutative_and_non_decreasing():
-    model = UnionOperator(UnionConfig()).eval()
+    model = operator()
     a, b = spectra(64, 1), spectra(64, 2)
     with torch.no_grad():
         ab, sigma_ab = model(a, b)
@@ -32,7 +80,7 @@ def test_union_is_exactly_commutative_and_non_decreasing():
 @pytest.mark.parametrize("factor", [0.01, 0.25, 3.0, 1e4])
 def test_union_is_scale_equivariant(factor):
     """A body scaled by s has every eigenvalue scaled by 1/s², its unions' included."""
-    model = UnionOperator(UnionConfig()).eval()
+    model = operator()
     a, b = spectra(16, 3), spectra(16, 4)
     with torch.no_grad():
         union, sigma = model(a, b)
@@ -44,7 +92,7 @@ def test_union_is_scale_equivariant(factor):
 def test_union_keeps_the_relative_size_of_the_parts():
     """The common scale is shared by both operands, never one per part: a bigger second part
     (same shape of spectrum) is a different union, not the same one rescaled."""
-    model = UnionOperator(UnionConfig()).eval()
+    model = operator()
     a, b = spectra(16, 5), spectra(16, 6)
     with torch.no_grad():
         union = model(a, b)[0]

@@ -1,6 +1,6 @@
 """Train the region localizer on predicted unions (operator frozen) and noisy true spectra.
 
-Samples: for each training row, the operator's predicted union with the union mask, and the
+Samples: for each training row, the operator's leave-one-out predicted union with the union mask, and the
 true spectra of part A, part B and the union (a full-coverage union is the whole body) with a
 small multiplicative noise redrawn every epoch. The loss is the area-weighted cross-entropy
 against the true mask or its mirror, whichever is smaller (spectra cannot tell them apart).
@@ -29,7 +29,7 @@ from training.learning.fit import (
 )
 from training.learning.localizer_net import Localizer, LocalizerConfig, feature_statistics
 from training.learning.masks import symmetric_scores
-from training.learning.train_union import predict
+from training.learning.train_union import memory_rows, predict
 from training.learning.union_net import UnionOperator
 
 
@@ -99,9 +99,12 @@ def train_localizer(
     train_rows = pairs.split == "train"
     if identities is not None:
         train_rows &= np.isin(data.identity_of(pairs.shape_a), identities)
-    train = pairs.rows(np.flatnonzero(train_rows))
+    selected = np.flatnonzero(train_rows)
+    train = pairs.rows(selected)
     validation = pairs.rows(np.flatnonzero(pairs.split == "validation"))
-    spectra, mask_ids, noisy = _samples(data, train, predict(union, train.a, train.b)[0])
+    # Leave-one-out unions: what the operator predicts for pairs it has not stored.
+    own = np.searchsorted(memory_rows(data), selected)
+    spectra, mask_ids, noisy = _samples(data, train, predict(union, train.a, train.b, own)[0])
     functions, areas = template_basis(data, config.basis or 1)
     mean, std = feature_statistics(spectra)
     model = Localizer(config, functions, mean, std).to(device)
