@@ -40,22 +40,23 @@ def test_memory_finds_a_stored_pair_in_either_order_and_at_any_scale():
     memory = UnionMemory(a, b, union)
     for factor in (1.0, 0.05, 40.0):
         for first, second in ((a, b), (b, a)):
-            prior = memory(*relative_logs(first * factor, second * factor))
+            prior, distance = memory(*relative_logs(first * factor, second * factor), 1)
             scale = common_scale(first * factor, second * factor)
-            torch.testing.assert_close(prior * scale, union * factor, rtol=1e-5, atol=0)
+            torch.testing.assert_close(prior[:, 0] * scale, union * factor, rtol=1e-5, atol=0)
+            assert (distance < 1e-2).all()
 
 
-def test_memory_hides_the_excluded_row():
-    """With its own row hidden, a stored pair gets the union of the nearest other pair."""
+def test_memory_returns_the_nearest_other_pairs_in_order():
+    """With its own row hidden, a stored pair gets the unions of the nearest other pairs."""
     a, b, union = spectra(30, 13), spectra(30, 14), spectra(30, 15)
     memory = UnionMemory(a, b, union)
     za, zb = relative_logs(a, b)
-    prior = memory(za, zb, torch.arange(30))
-    keys = torch.cat([za, zb], 1)
-    distance = torch.cdist(keys, memory.keys).fill_diagonal_(torch.inf)
-    swapped = torch.cdist(torch.cat([zb, za], 1), memory.keys).fill_diagonal_(torch.inf)
-    nearest = torch.minimum(distance, swapped).argmin(1)
-    torch.testing.assert_close(prior, memory.unions[nearest])
+    priors, distances = memory(za, zb, 3, torch.arange(30))
+    forward = torch.cdist(torch.cat([za, zb], 1), memory.keys)
+    backward = torch.cdist(torch.cat([zb, za], 1), memory.keys)
+    expected, nearest = torch.minimum(forward, backward).fill_diagonal_(torch.inf).topk(3, largest=False)
+    torch.testing.assert_close(priors, memory.unions[nearest])
+    torch.testing.assert_close(distances, expected, rtol=1e-4, atol=1e-3)
 
 
 def test_an_untrained_operator_returns_the_prior():
