@@ -9,7 +9,8 @@ exported as constants of the ONNX graph, so the service needs nothing else) and 
 the correction of those priors. The correction is a DeepSets network: one encoder φ reads each operand with the
 unions of the few nearest pairs, the two codes are summed (exactly commutative, as IEEE
 addition is), and a head ρ, which also sees how far those pairs are, returns the change of
-every log-eigenvalue of the nearest union and its uncertainty. It is trained
+every log-eigenvalue of the nearest union. σ is the spread of the retrieved unions around the
+prediction, calibrated on validation data. It is trained
 leave-one-out, each training pair seeing the prior of its nearest *other* pair, as a new pair
 would.
 
@@ -27,6 +28,7 @@ import torch
 from torch import nn
 
 EPSILON = 1e-3  # keeps the zero λ₁ of a closed (full-body) union finite in log space
+SIGMA_FLOOR = 1e-2  # the smallest relative σ (the pose noise floor is ~2 %)
 
 
 @dataclass(frozen=True)
@@ -81,7 +83,7 @@ class UnionMemory(nn.Module):
         nearest, rows = torch.topk(distance, count, dim=1, largest=False)
         # The query's own norm, summed per operand so that both orders give the same bits.
         query_norm = (za**2).sum(1, keepdim=True) + (zb**2).sum(1, keepdim=True)
-        return self.unions[rows], torch.sqrt(torch.clamp(nearest + query_norm, min=0))
+        return self.unions[rows], torch.sqrt(torch.clamp(nearest + query_norm, min=1e-8))  # finite gradient at 0
 
 
 def _mlp(inputs: int, width: int, outputs: int, dropout: float) -> nn.Sequential:
@@ -100,8 +102,8 @@ class UnionOperator(nn.Module):
         k, n, width = config.k, config.neighbours, config.width
         self.memory = memory
         self.part = _mlp(k + n * k, width, width, config.dropout)  # φ(z(part), z(priors))
-        self.head = _mlp(width + n * k + n, width, 2 * k, config.dropout)  # ρ(Σφ, z(priors), distances)
-        nn.init.zeros_(self.head[-1].weight)  # start at the nearest prior, with σ = s
+        self.head = _mlp(width + n * k + n, width, k, config.dropout)  # ρ(Σφ, z(priors), distances) → Δz
+        nn.init.zeros_(self.head[-1].weight)  # start at the nearest prior
         nn.init.zeros_(self.head[-1].bias)
         # Interval calibration factor, fitted on validation data after training.
         self.register_buffer("sigma_scale", torch.ones(()))
@@ -115,8 +117,18 @@ class UnionOperator(nn.Module):
         unions, distances = self.memory(za, zb, self.config.neighbours, exclude)
         priors = relative_log(unions, 1.0).flatten(1)
         pooled = self.part(torch.cat([za, priors], dim=1)) + self.part(torch.cat([zb, priors], dim=1))
-        out = self.head(torch.cat([pooled, priors, distances], dim=1))
-        union = torch.relu(torch.exp(priors[:, :k] + out[:, :k]) - EPSILON)
-        union = torch.sort(union, dim=-1).values * scale
-        sigma = torch.exp(out[:, k:]) * scale * self.sigma_scale
-        return union, sigma
+        change = self.head(torch.cat([pooled, priors, distances], dim=1))
+        union = torch.sort(torch.relu(torch.exp(priors[:, :k] + change) - EPSILON), dim=-1).values
+        return union * scale, self.sigma(union, priors) * scale
+
+    def sigma(self, union: torch.Tensor, priors: torch.Tensor) -> torch.Tensor:
+        """σ relative to the common scale: how far the neighbours' unions lie from the prediction.
+
+        The root-mean-square distance in z of the retrieved unions is a spread of plausible
+        answers, scaled on validation data to a calibrated interval. A learned σ head, trained
+        by Gaussian likelihood next to the mean, cost the mean a tenth of its accuracy
+        (validation mae 5.1 → 5.5) and diverged on chains.
+        """
+        neighbours = priors.unflatten(1, (self.config.neighbours, self.config.k))
+        spread = (neighbours - relative_log(union, 1.0)[:, None]).pow(2).mean(1).sqrt()
+        return (spread + SIGMA_FLOOR) * (union + EPSILON) * self.sigma_scale
