@@ -90,3 +90,32 @@ def test_a_killed_run_resumes_where_it_stopped(trained, tmp_path):
     state = torch.load(tmp_path / "resumed.pt", weights_only=False)
     assert state["epoch"] == 2
     assert {"weights", "optimizer", "config", "best_metric", "best_weights"} <= set(state)
+
+
+def test_resuming_an_early_stopped_run_trains_nothing(trained, tmp_path):
+    """A run stopped by its patience is loaded as it is: no extra epoch on resume."""
+    root, _ = trained
+    data = SpectralData(root / "data")
+    settings = replace(TRAINING_PRESETS["tiny"].union, epochs=3, patience=0)  # stops after epoch 1
+    first = train_union(data, tmp_path / "union.pt", settings)
+    again = train_union(data, tmp_path / "union.pt", settings)
+    for name, value in first.state_dict().items():
+        torch.testing.assert_close(again.state_dict()[name], value, rtol=0, atol=0, msg=name)
+    assert torch.load(tmp_path / "union.pt", weights_only=False)["epoch"] == 1
+
+
+def test_evaluate_reproduces_the_trained_figures_and_refuses_unfinished_runs(trained, tmp_path):
+    from typer.testing import CliRunner
+
+    from training.cli import cli
+
+    root, metrics = trained
+    again = run_pipeline(
+        root / "data", root / "runs", tmp_path / "models", TRAINING_PRESETS["tiny"], 0, "test", train=False
+    )
+    assert again["rows"] == metrics["rows"] and again["chains"] == metrics["chains"]
+    empty = tmp_path / "no-runs"
+    arguments = ["evaluate", "--data", str(root / "data"), "--runs", str(empty), "--preset", "tiny"]
+    result = CliRunner().invoke(cli, [*arguments, "--models", str(tmp_path / "unused")])
+    assert result.exit_code == 2 and "not trained to the end" in result.output
+    assert not (tmp_path / "unused").exists() and not empty.exists()

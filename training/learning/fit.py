@@ -43,6 +43,12 @@ class Progress:
     stale_epochs: int = 0
     history: list[float] = field(default_factory=list)  # the validation metric of every epoch
 
+    def remaining(self, epochs: int, patience: int) -> range:
+        """The epochs still to train: none once the budget is spent or validation went stale
+        (so resuming a finished run, early-stopped or not, trains nothing)."""
+        stopped = bool(self.history) and self.stale_epochs >= patience
+        return range(self.epoch, self.epoch if stopped else epochs)
+
     def finish_epoch(self, epoch: int, metric: float) -> bool:
         """Record a finished epoch's validation metric; True when it is the best so far."""
         self.epoch = epoch + 1
@@ -108,13 +114,17 @@ def load_checkpoint(
     schedule.load_state_dict(state["schedule"])
     torch.set_rng_state(state["torch_rng"])
     generator.set_state(state["generator"])
-    progress = Progress(
+    return _progress(state), state["best_weights"]
+
+
+def _progress(state: dict) -> Progress:
+    return Progress(
         state["epoch"], state["best_metric"], state["best_epoch"], state["stale_epochs"], list(state["history"])
     )
-    return progress, state["best_weights"]
 
 
-def best_weights(path: Path) -> tuple[dict, dict]:
-    """(config, best weights) of a finished run."""
-    state = torch.load(path, map_location="cpu", weights_only=False)
-    return state["config"], state["best_weights"]
+def is_finished(path: Path, epochs: int, patience: int) -> bool:
+    """Whether the run checkpointed at ``path`` exists and has nothing left to train."""
+    if not path.exists():
+        return False
+    return not _progress(torch.load(path, map_location="cpu", weights_only=False)).remaining(epochs, patience)

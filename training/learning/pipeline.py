@@ -21,11 +21,12 @@ from training.learning.card import update_card
 from training.learning.data import SpectralData
 from training.learning.evaluate import evaluate
 from training.learning.export import export_localizer, export_union, localizer_parity, union_parity
-from training.learning.fit import validation_history
+from training.learning.fit import is_finished, validation_history
 from training.learning.localizer_net import Localizer, LocalizerConfig
 from training.learning.shapedna import complete_shapes, retrieval_table, save_seed
 from training.learning.train_localizer import LocalizerTraining, train_localizer
 from training.learning.train_union import UnionTraining, predict, train_union
+from training.learning.union_net import UnionConfig
 
 UNION_FILE, LOCALIZER_FILE = "union.onnx", "localizer.onnx"
 
@@ -34,6 +35,7 @@ UNION_FILE, LOCALIZER_FILE = "union.onnx", "localizer.onnx"
 class TrainingPreset:
     union: UnionTraining = field(default_factory=UnionTraining)
     localizer: LocalizerTraining = field(default_factory=LocalizerTraining)
+    union_model: UnionConfig = field(default_factory=UnionConfig)
 
 
 TRAINING_PRESETS = {
@@ -42,6 +44,13 @@ TRAINING_PRESETS = {
     "standard": TrainingPreset(
         UnionTraining(epochs=60, batch=64, learning_rate=1e-3, first_restart=60, dropout=0.0),
         LocalizerTraining(epochs=8, batch=128, first_restart=8),
+    ),
+    # The paper's two transformers as the correction, same memory, loss and data: the comparison
+    # the DeepSets head must stand (~95 s per epoch on one core, so fewer epochs).
+    "standard-transformer": TrainingPreset(
+        UnionTraining(epochs=24, batch=64, learning_rate=1e-3, first_restart=24, dropout=0.0),
+        LocalizerTraining(epochs=8, batch=128, first_restart=8),
+        UnionConfig(correction="transformer"),
     ),
 }
 
@@ -56,19 +65,45 @@ def localizer_identities(data: SpectralData) -> dict[str, np.ndarray | None]:
     return {"one": known_men[:1], "six": six, "all": None}
 
 
-def run_pipeline(data_dir: Path, runs: Path, models: Path, preset: TrainingPreset, seed: int, command: str) -> dict:
-    """Train every model, export the served ones, check parity, evaluate; returns metrics."""
+LOCALIZER_RUNS = ("one", "six", "all", "per_vertex")
+
+
+def localizer_checkpoint(runs: Path, name: str) -> Path:
+    return runs / f"localizer-{name.replace('_', '-')}.pt"
+
+
+def unfinished_runs(runs: Path, preset: TrainingPreset) -> list[Path]:
+    """The checkpoints under ``runs`` that are missing or have epochs left to train."""
+    union, localizer = preset.union, preset.localizer
+    checks = [(runs / "union.pt", union.epochs, union.patience)]
+    checks += [(localizer_checkpoint(runs, name), localizer.epochs, localizer.patience) for name in LOCALIZER_RUNS]
+    return [path for path, epochs, patience in checks if not is_finished(path, epochs, patience)]
+
+
+def run_pipeline(
+    data_dir: Path, runs: Path, models: Path, preset: TrainingPreset, seed: int, command: str, train: bool = True
+) -> dict:
+    """Train every model (or, with ``train=False``, load finished runs only), export the served
+    ones, check parity, evaluate; returns metrics."""
+    if not train and (unfinished := unfinished_runs(runs, preset)):
+        raise FileNotFoundError(f"not trained to the end: {', '.join(str(p) for p in unfinished)}")
     started = time.perf_counter()
     data = SpectralData(data_dir, seed=seed)
-    union = train_union(data, runs / "union.pt", settings=replace(preset.union, seed=seed))
-    localizers: dict[str, Localizer] = {}
+    union = train_union(data, runs / "union.pt", replace(preset.union, seed=seed), preset.union_model)
     settings = replace(preset.localizer, seed=seed)
-    for name, identities in localizer_identities(data).items():
-        localizers[name] = train_localizer(data, union, runs / f"localizer-{name}.pt", identities, settings)
-    # The comparison the basis head must stand: a full per-vertex output layer, same data.
-    localizers["per_vertex"] = train_localizer(
-        data, union, runs / "localizer-per-vertex.pt", None, settings, LocalizerConfig(basis=None)
-    )
+    identities = localizer_identities(data)
+    localizers: dict[str, Localizer] = {
+        name: train_localizer(
+            data,
+            union,
+            localizer_checkpoint(runs, name),
+            identities.get(name),  # the per-vertex head trains on all identities
+            settings,
+            # The comparison the basis head must stand: a full per-vertex output layer, same data.
+            LocalizerConfig(basis=None) if name == "per_vertex" else None,
+        )
+        for name in LOCALIZER_RUNS
+    }
     trained = time.perf_counter()
     models.mkdir(parents=True, exist_ok=True)
     export_union(union, models / UNION_FILE)

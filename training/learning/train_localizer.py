@@ -124,7 +124,8 @@ def train_localizer(
     validation_spectra = predict(union, validation.a, validation.b)[0]
     validation_masks = data.masks(validation.mask_union)
     steps = max(1, len(spectra) // settings.batch)
-    bar = tqdm(range(progress.epoch, settings.epochs), desc="localizer", unit="epoch", initial=progress.epoch)
+    epochs = progress.remaining(settings.epochs, settings.patience)
+    bar = tqdm(epochs, desc="localizer", unit="epoch", initial=progress.epoch, total=settings.epochs)
     for epoch in bar:
         model.train()
         order = torch.randperm(len(spectra), generator=generator).numpy()

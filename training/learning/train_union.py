@@ -151,7 +151,8 @@ def train_union(
     chain_rows = np.flatnonzero(~data.triples.test)
     chain_tensors = [_tensor(s[chain_rows], device) for s in data.triples.spectra]
     steps = max(1, len(train) // settings.batch)
-    bar = tqdm(range(progress.epoch, settings.epochs), desc="union", unit="epoch", initial=progress.epoch)
+    epochs = progress.remaining(settings.epochs, settings.patience)
+    bar = tqdm(epochs, desc="union", unit="epoch", initial=progress.epoch, total=settings.epochs)
     for epoch in bar:
         model.train()
         order = torch.randperm(len(train), generator=generator)
