@@ -21,12 +21,17 @@ def spectra(count: int, seed: int) -> torch.Tensor:
     return torch.cumsum(torch.rand(count, 20, generator=generator) * 40, dim=1)
 
 
-def operator(seed: int = 0, stored: int = 50) -> UnionOperator:
-    """An operator with random weights (the head's last layer too) over a random memory."""
+CORRECTIONS = ("deepsets", "transformer")
+
+
+def operator(correction: str, seed: int = 0, stored: int = 50) -> UnionOperator:
+    """An operator with random weights (the correction's zero-initialised last layer too) over a
+    random memory."""
     memory = UnionMemory(spectra(stored, 100 + seed), spectra(stored, 200 + seed), spectra(stored, 300 + seed) / 2)
-    model = UnionOperator(UnionConfig(), memory)
     torch.manual_seed(seed)
-    torch.nn.init.normal_(model.head[-1].weight, std=0.05)
+    model = UnionOperator(UnionConfig(correction=correction), memory)
+    last = model.correction.rho if correction == "transformer" else model.correction.head[-1]
+    torch.nn.init.normal_(last.weight, std=0.05)
     return model.eval()
 
 
@@ -59,17 +64,19 @@ def test_memory_returns_the_nearest_other_pairs_in_order():
     torch.testing.assert_close(distances, expected, rtol=1e-4, atol=1e-3)
 
 
-def test_an_untrained_operator_returns_the_prior():
-    """The head starts at zero: before training, the operator is the nearest-pair lookup."""
+@pytest.mark.parametrize("correction", CORRECTIONS)
+def test_an_untrained_operator_returns_the_prior(correction):
+    """The correction starts at zero: before training, the operator is the nearest-pair lookup."""
     a, b, union = spectra(30, 16), spectra(30, 17), spectra(30, 18)
-    model = UnionOperator(UnionConfig(), UnionMemory(a, b, union)).eval()
+    model = UnionOperator(UnionConfig(correction=correction), UnionMemory(a, b, union)).eval()
     with torch.no_grad():
         predicted, _ = model(b * 3, a * 3)
     torch.testing.assert_close(predicted, union * 3, rtol=1e-4, atol=1e-3)
 
 
-def test_union_is_exactly_commutative_and_non_decreasing():
-    model = operator()
+@pytest.mark.parametrize("correction", CORRECTIONS)
+def test_union_is_exactly_commutative_and_non_decreasing(correction):
+    model = operator(correction)
     a, b = spectra(64, 1), spectra(64, 2)
     with torch.no_grad():
         ab, sigma_ab = model(a, b)
@@ -78,10 +85,11 @@ def test_union_is_exactly_commutative_and_non_decreasing():
     assert (torch.diff(ab, dim=1) >= 0).all() and (ab >= 0).all() and (sigma_ab > 0).all()
 
 
+@pytest.mark.parametrize("correction", CORRECTIONS)
 @pytest.mark.parametrize("factor", [0.01, 0.25, 3.0, 1e4])
-def test_union_is_scale_equivariant(factor):
+def test_union_is_scale_equivariant(factor, correction):
     """A body scaled by s has every eigenvalue scaled by 1/s², its unions' included."""
-    model = operator()
+    model = operator(correction)
     a, b = spectra(16, 3), spectra(16, 4)
     with torch.no_grad():
         union, sigma = model(a, b)
@@ -90,10 +98,11 @@ def test_union_is_scale_equivariant(factor):
     torch.testing.assert_close(scaled_sigma, sigma * factor, rtol=1e-5, atol=0)
 
 
-def test_union_keeps_the_relative_size_of_the_parts():
+@pytest.mark.parametrize("correction", CORRECTIONS)
+def test_union_keeps_the_relative_size_of_the_parts(correction):
     """The common scale is shared by both operands, never one per part: a bigger second part
     (same shape of spectrum) is a different union, not the same one rescaled."""
-    model = operator()
+    model = operator(correction)
     a, b = spectra(16, 5), spectra(16, 6)
     with torch.no_grad():
         union = model(a, b)[0]

@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
-from torch import nn
+from torch import Tensor, nn
 
 EPSILON = 1e-3  # keeps the zero λ₁ of a closed (full-body) union finite in log space
 SIGMA_FLOOR = 1e-2  # the smallest relative σ (the pose noise floor is ~2 %)
@@ -35,7 +35,10 @@ SIGMA_FLOOR = 1e-2  # the smallest relative σ (the pose noise floor is ~2 %)
 class UnionConfig:
     k: int = 20
     neighbours: int = 4
-    width: int = 256
+    correction: str = "deepsets"  # a key of CORRECTIONS
+    width: int = 256  # DeepSets hidden width
+    embedding: int = 32  # transformer token width
+    heads: int = 8
     dropout: float = 0.0
 
     def as_dict(self) -> dict:
@@ -93,32 +96,96 @@ def _mlp(inputs: int, width: int, outputs: int, dropout: float) -> nn.Sequential
     )  # fmt: skip
 
 
+class DeepSetsCorrection(nn.Module):
+    """Δz from the operands and the priors: φ per operand, summed, then ρ.
+
+    The sum of the two codes is what makes it commutative: IEEE addition is, bit for bit.
+    """
+
+    def __init__(self, config: "UnionConfig") -> None:
+        super().__init__()
+        k, n, width = config.k, config.neighbours, config.width
+        self.part = _mlp(k + n * k, width, width, config.dropout)  # φ(z(part), z(priors))
+        self.head = _mlp(width + n * k + n, width, k, config.dropout)  # ρ(Σφ, z(priors), distances)
+        nn.init.zeros_(self.head[-1].weight)  # start at the nearest prior
+        nn.init.zeros_(self.head[-1].bias)
+
+    def forward(self, za: Tensor, zb: Tensor, priors: Tensor, distances: Tensor) -> Tensor:
+        flat = priors.flatten(1)
+        pooled = self.part(torch.cat([za, flat], dim=1)) + self.part(torch.cat([zb, flat], dim=1))
+        return self.head(torch.cat([pooled, flat, distances], dim=1))
+
+
+class TransformerCorrection(nn.Module):
+    """Δz by the paper's two transformers, reading the priors as well.
+
+    A token per eigenvalue index: the operand's offset in z (z_i − z_{i−1}, the paper's offset
+    encoding in relative-log space), its z, the priors' z at that index, a learned position θᵢ
+    and which operand it is. T_A reads both operands' tokens and returns the first operand's,
+    informed by the second; it runs in both orders and the two are summed (commutative bit for
+    bit, each order being its own call of the same shape). T_B decodes, with the key distances
+    added to every token, and ρ maps each token to its Δzᵢ.
+    """
+
+    def __init__(self, config: "UnionConfig") -> None:
+        super().__init__()
+        k, n, d = config.k, config.neighbours, config.embedding
+        self.k = k
+        self.embed = nn.Linear(2 + n, d)
+        self.position = nn.Parameter(torch.randn(k, d) * 0.02)
+        self.operand = nn.Parameter(torch.randn(2, d) * 0.02)  # self, other
+        self.distance = nn.Linear(n, d)
+        self.mixer = _encoder(d, config.heads, 6, 64, config.dropout)  # T_A
+        self.decoder = _encoder(d, config.heads, 3, 32, config.dropout)  # T_B
+        self.rho = nn.Linear(d, 1)
+        nn.init.zeros_(self.rho.weight)  # start at the nearest prior
+        nn.init.zeros_(self.rho.bias)
+
+    def _tokens(self, z: torch.Tensor, priors: torch.Tensor, role: int) -> torch.Tensor:
+        offsets = torch.diff(z, dim=1, prepend=torch.zeros_like(z[:, :1]))
+        features = torch.cat([offsets[..., None], z[..., None], priors.transpose(1, 2)], dim=-1)
+        return self.embed(features) + self.position + self.operand[role]
+
+    def _informed(self, first: torch.Tensor, second: torch.Tensor, priors: torch.Tensor) -> torch.Tensor:
+        tokens = torch.cat([self._tokens(first, priors, 0), self._tokens(second, priors, 1)], dim=1)
+        return self.mixer(tokens)[:, : self.k]
+
+    def forward(self, za: Tensor, zb: Tensor, priors: Tensor, distances: Tensor) -> Tensor:
+        mixed = self._informed(za, zb, priors) + self._informed(zb, za, priors)
+        decoded = self.decoder(mixed + self.distance(distances)[:, None])
+        return self.rho(decoded)[..., 0]
+
+
+def _encoder(width: int, heads: int, layers: int, feed_forward: int, dropout: float) -> nn.TransformerEncoder:
+    layer = nn.TransformerEncoderLayer(
+        width, heads, feed_forward, dropout, activation="gelu", batch_first=True, norm_first=True
+    )
+    return nn.TransformerEncoder(layer, layers, enable_nested_tensor=False)
+
+
+CORRECTIONS = {"deepsets": DeepSetsCorrection, "transformer": TransformerCorrection}
+
+
 class UnionOperator(nn.Module):
     """(λ(A), λ(B)) → (λ(A ∪ B), σ), both (B, k) in 1/m²."""
 
     def __init__(self, config: UnionConfig, memory: UnionMemory) -> None:
         super().__init__()
         self.config = config
-        k, n, width = config.k, config.neighbours, config.width
         self.memory = memory
-        self.part = _mlp(k + n * k, width, width, config.dropout)  # φ(z(part), z(priors))
-        self.head = _mlp(width + n * k + n, width, k, config.dropout)  # ρ(Σφ, z(priors), distances) → Δz
-        nn.init.zeros_(self.head[-1].weight)  # start at the nearest prior
-        nn.init.zeros_(self.head[-1].bias)
+        self.correction = CORRECTIONS[config.correction](config)
         # Interval calibration factor, fitted on validation data after training.
         self.register_buffer("sigma_scale", torch.ones(()))
 
     def forward(
         self, a: torch.Tensor, b: torch.Tensor, exclude: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        k = self.config.k
         scale = common_scale(a, b)
         za, zb = relative_log(a, scale), relative_log(b, scale)
         unions, distances = self.memory(za, zb, self.config.neighbours, exclude)
-        priors = relative_log(unions, 1.0).flatten(1)
-        pooled = self.part(torch.cat([za, priors], dim=1)) + self.part(torch.cat([zb, priors], dim=1))
-        change = self.head(torch.cat([pooled, priors, distances], dim=1))
-        union = torch.sort(torch.relu(torch.exp(priors[:, :k] + change) - EPSILON), dim=-1).values
+        priors = relative_log(unions, 1.0)  # (B, neighbours, k)
+        change = self.correction(za, zb, priors, distances)
+        union = torch.sort(torch.relu(torch.exp(priors[:, 0] + change) - EPSILON), dim=-1).values
         return union * scale, self.sigma(union, priors) * scale
 
     def sigma(self, union: torch.Tensor, priors: torch.Tensor) -> torch.Tensor:
@@ -129,6 +196,5 @@ class UnionOperator(nn.Module):
         by Gaussian likelihood next to the mean, cost the mean a tenth of its accuracy
         (validation mae 5.1 → 5.5) and diverged on chains.
         """
-        neighbours = priors.unflatten(1, (self.config.neighbours, self.config.k))
-        spread = (neighbours - relative_log(union, 1.0)[:, None]).pow(2).mean(1).sqrt()
+        spread = (priors - relative_log(union, 1.0)[:, None]).pow(2).mean(1).sqrt()
         return (spread + SIGMA_FLOOR) * (union + EPSILON) * self.sigma_scale
