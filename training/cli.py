@@ -33,45 +33,47 @@ def build_dataset_command(
     typer.echo(f"{manifest['rows']} rows in {manifest['build_seconds']} s")
 
 
+DataOption = Annotated[Path, typer.Option(help="A built data set directory.")]
+ModelsOption = Annotated[Path, typer.Option(help="Where the ONNX models, metrics and card go.")]
+PresetOption = Annotated[str, typer.Option(help="Training preset: tiny, standard or standard-transformer.")]
+
+
 @cli.command("train")
 def train_command(
-    data: Annotated[Path, typer.Option(help="A built data set directory.")] = Path("data/standard"),
+    data: DataOption = Path("data/standard"),
     runs: Annotated[Path, typer.Option(help="Checkpoints (resumed if present).")] = Path("runs/standard"),
-    models: Annotated[Path, typer.Option(help="Where the ONNX models, metrics and card go.")] = Path("models"),
-    preset: Annotated[str, typer.Option(help="Training preset: tiny, standard or standard-transformer.")] = "standard",
+    models: ModelsOption = Path("models"),
+    preset: PresetOption = "standard",
     seed: Annotated[int, typer.Option()] = 0,
 ) -> None:
     """Train the union operator and the localizers, export to ONNX, evaluate, write the model card."""
-    from training.learning.pipeline import TRAINING_PRESETS, run_pipeline
-
-    if preset not in TRAINING_PRESETS:
-        raise typer.BadParameter(f"unknown preset {preset!r}")
-    command = f"spectral-unions-train train --data {data} --runs {runs} --models {models} --preset {preset}"
-    command += f" --seed {seed}"
-    metrics = run_pipeline(data, runs, models, TRAINING_PRESETS[preset], seed, command)
-    typer.echo(f"trained and evaluated in {metrics['seconds']['total']} s; parity {metrics['parity_max_relative']}")
+    _pipeline("train", data, runs, models, preset, seed)
 
 
 @cli.command("evaluate")
 def evaluate_command(
-    data: Annotated[Path, typer.Option(help="The data set the runs were trained on.")] = Path("data/standard"),
+    data: DataOption = Path("data/standard"),
     runs: Annotated[Path, typer.Option(help="Finished checkpoints of `train`.")] = Path("runs/standard"),
-    models: Annotated[Path, typer.Option(help="Where the ONNX models, metrics and card go.")] = Path("models"),
-    preset: Annotated[str, typer.Option(help="The preset the runs were trained with.")] = "standard",
+    models: ModelsOption = Path("models"),
+    preset: PresetOption = "standard",
     seed: Annotated[int, typer.Option()] = 0,
 ) -> None:
     """Re-export and re-evaluate finished runs without training: metrics.json and the card's tables."""
-    from training.learning.pipeline import TRAINING_PRESETS, run_pipeline
+    _pipeline("evaluate", data, runs, models, preset, seed)
+
+
+def _pipeline(verb: str, data: Path, runs: Path, models: Path, preset: str, seed: int) -> None:
+    from training.learning.pipeline import TRAINING_PRESETS, UnfinishedRuns, run_pipeline
 
     if preset not in TRAINING_PRESETS:
         raise typer.BadParameter(f"unknown preset {preset!r}")
-    command = f"spectral-unions-train evaluate --data {data} --runs {runs} --models {models} --preset {preset}"
+    command = f"spectral-unions-train {verb} --data {data} --runs {runs} --models {models} --preset {preset}"
     command += f" --seed {seed}"
     try:
-        metrics = run_pipeline(data, runs, models, TRAINING_PRESETS[preset], seed, command, train=False)
-    except FileNotFoundError as error:
+        metrics = run_pipeline(data, runs, models, TRAINING_PRESETS[preset], seed, command, train=verb == "train")
+    except UnfinishedRuns as error:
         raise typer.BadParameter(str(error), param_hint="--runs") from error
-    typer.echo(f"evaluated in {metrics['seconds']['total']} s; parity {metrics['parity_max_relative']}")
+    typer.echo(f"{verb}: {metrics['seconds']['total']} s; parity {metrics['parity_max_relative']}")
 
 
 def main() -> None:

@@ -72,6 +72,10 @@ def localizer_checkpoint(runs: Path, name: str) -> Path:
     return runs / f"localizer-{name.replace('_', '-')}.pt"
 
 
+class UnfinishedRuns(Exception):
+    """Evaluation without training was asked of runs that are missing or not trained to the end."""
+
+
 def unfinished_runs(runs: Path, preset: TrainingPreset) -> list[Path]:
     """The checkpoints under ``runs`` that are missing or have epochs left to train."""
     union, localizer = preset.union, preset.localizer
@@ -86,7 +90,7 @@ def run_pipeline(
     """Train every model (or, with ``train=False``, load finished runs only), export the served
     ones, check parity, evaluate; returns metrics."""
     if not train and (unfinished := unfinished_runs(runs, preset)):
-        raise FileNotFoundError(f"not trained to the end: {', '.join(str(p) for p in unfinished)}")
+        raise UnfinishedRuns(f"not trained to the end: {', '.join(str(p) for p in unfinished)}")
     started = time.perf_counter()
     data = SpectralData(data_dir, seed=seed)
     union = train_union(data, runs / "union.pt", replace(preset.union, seed=seed), preset.union_model)
