@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from training.learning.baselines import UnionLookup, elementwise_min, larger_part
+from training.learning.card import per_eigenvalue_table
 from training.learning.masks import symmetric_scores
 
 
@@ -66,3 +67,20 @@ def test_retrieval_hit_rates_hand_checked():
     # Asked as person 2, the first query ranks person 0 and then person 1 above person 2 (4th).
     rates = hit_rates(queries[:1], np.array([2]), np.array([0]), stored, people)
     assert rates == {"top1": 0.0, "top5": 1.0, "top10": 1.0}
+
+
+def test_per_eigenvalue_table_pools_rows_by_their_counts():
+    def row(count: int, curve: list[float]) -> dict:
+        return {"rows": count, "union": {"operator": {"mre_per_eigenvalue": curve}}}
+
+    metrics = {
+        "rows": {
+            "test_a/known_man/mesh": row(1, [0.1, 0.2]),
+            "test_a/unknown_man/mesh": row(3, [0.5, 0.2]),
+            "test_a/child/mesh": row(100, [9.0, 9.0]),  # not a paper row: left out
+            "test_b/known_man/mesh": row(2, [0.3, 0.0]),
+        }
+    }
+    lines = per_eigenvalue_table(metrics, methods=("operator",))
+    assert lines[0] == "| eigenvalue | test_a operator | test_b operator |"
+    assert lines[2:] == ["| λ1 | 40.0 % | 30.0 % |", "| λ2 | 20.0 % | 0.0 % |"]

@@ -74,7 +74,7 @@ def test_tables_cover_the_test_rows(trained):
     row = next(iter(written["rows"].values()))
     assert {"operator", "elementwise_min", "larger_part", "lookup"} <= set(row["union"])
     card = (root / "models" / "MODEL_CARD.md").read_text()
-    assert "| test_a/known_man/mesh |" in card
+    assert "| test_a/known_man/mesh |" in card and "| λ20 |" in card
 
 
 def test_a_killed_run_resumes_where_it_stopped(trained, tmp_path):
