@@ -62,31 +62,43 @@ class UnionMemory(nn.Module):
     matched in both operand orders and the nearer is taken, so the prior commutes exactly and
     each pair is stored once. ``exclude`` (training only) hides one memory row per query, the
     query's own pair.
+
+    The search runs in float64: in float32 the expanded distance |k|² − 2q·k + |q|² loses ~1e-5
+    to cancellation, more than the gap between the nearest pairs of some queries, so PyTorch and
+    onnxruntime (whose float32 log and matmul round differently) picked different neighbours for
+    8 of 5 100 real queries. Keys are stored in float32 (the same bits in both) and widened.
     """
 
     def __init__(self, a: np.ndarray, b: np.ndarray, union: np.ndarray) -> None:
         super().__init__()
-        a_t, b_t, union_t = (torch.as_tensor(x, dtype=torch.float32) for x in (a, b, union))
-        scale = common_scale(a_t, b_t)
-        keys = torch.cat([relative_log(a_t, scale), relative_log(b_t, scale)], dim=1)
+        a_t, b_t, union_t = (torch.as_tensor(x, dtype=torch.float64) for x in (a, b, union))
+        keys = self.queries(a_t, b_t).float()
         self.register_buffer("keys", keys)
-        self.register_buffer("key_norms", (keys**2).sum(1))
-        self.register_buffer("unions", union_t / scale)
+        self.register_buffer("key_norms", (keys.double() ** 2).sum(1))
+        self.register_buffer("unions", (union_t / common_scale(a_t, b_t)).float())
 
-    def forward(
-        self, za: torch.Tensor, zb: torch.Tensor, count: int, exclude: torch.Tensor | None = None
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """The ``count`` nearest pairs' unions (B, count, k), in the queries' scale, nearest
-        first, and their key distances (B, count), from the queries' relative logs."""
-        forward = self.key_norms - 2 * torch.cat([za, zb], dim=1) @ self.keys.T
-        backward = self.key_norms - 2 * torch.cat([zb, za], dim=1) @ self.keys.T
-        distance = torch.minimum(forward, backward)
+    @staticmethod
+    def queries(a: Tensor, b: Tensor) -> Tensor:
+        """(z(a), z(b)) in float64, in the pair's common scale."""
+        a, b = a.double(), b.double()
+        scale = common_scale(a, b)
+        return torch.cat([relative_log(a, scale), relative_log(b, scale)], dim=1)
+
+    def forward(self, a: Tensor, b: Tensor, count: int, exclude: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """The ``count`` nearest pairs' unions (B, count, k), in the queries' common scale,
+        nearest first, and their key distances (B, count), for operands in 1/m²."""
+        k = a.shape[1]
+        forward = self.queries(a, b)
+        backward = torch.cat([forward[:, k:], forward[:, :k]], dim=1)
+        keys = self.keys.double().T
+        distance = torch.minimum(self.key_norms - 2 * forward @ keys, self.key_norms - 2 * backward @ keys)
         if exclude is not None:
             distance = distance.scatter(1, exclude[:, None], torch.inf)
         nearest, rows = torch.topk(distance, count, dim=1, largest=False)
         # The query's own norm, summed per operand so that both orders give the same bits.
-        query_norm = (za**2).sum(1, keepdim=True) + (zb**2).sum(1, keepdim=True)
-        return self.unions[rows], torch.sqrt(torch.clamp(nearest + query_norm, min=1e-8))  # finite gradient at 0
+        query_norm = (forward[:, :k] ** 2).sum(1, keepdim=True) + (forward[:, k:] ** 2).sum(1, keepdim=True)
+        distances = torch.sqrt(torch.clamp(nearest + query_norm, min=1e-8))  # finite gradient at 0
+        return self.unions[rows], distances.float()
 
 
 def _mlp(inputs: int, width: int, outputs: int, dropout: float) -> nn.Sequential:
@@ -182,7 +194,7 @@ class UnionOperator(nn.Module):
     ) -> tuple[torch.Tensor, torch.Tensor]:
         scale = common_scale(a, b)
         za, zb = relative_log(a, scale), relative_log(b, scale)
-        unions, distances = self.memory(za, zb, self.config.neighbours, exclude)
+        unions, distances = self.memory(a, b, self.config.neighbours, exclude)
         priors = relative_log(unions, 1.0)  # (B, neighbours, k)
         change = self.correction(za, zb, priors, distances)
         union = torch.sort(torch.relu(torch.exp(priors[:, 0] + change) - EPSILON), dim=-1).values

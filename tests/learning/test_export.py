@@ -1,0 +1,30 @@
+"""The exported union operator picks the same training pairs as PyTorch, even among near-ties."""
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("onnxscript")
+
+from training.learning.export import export_union, session  # noqa: E402
+from training.learning.union_net import UnionConfig, UnionMemory, UnionOperator  # noqa: E402
+
+
+def test_onnx_and_pytorch_retrieve_the_same_pairs_among_near_ties(tmp_path):
+    """A memory of pairs that differ by ~0.1 % (the nearest gaps far below the float32 rounding
+    of a distance), with very different unions: a neighbour picked differently shows at once."""
+    rng = np.random.default_rng(0)
+    base_a, base_b = (np.cumsum(rng.uniform(1, 40, (1, 20)), axis=1) for _ in range(2))
+    stored = 4000
+    a = base_a * (1 + 1e-3 * rng.standard_normal((stored, 20)))
+    b = base_b * (1 + 1e-3 * rng.standard_normal((stored, 20)))
+    union = np.sort(rng.uniform(0.5, 80, (stored, 20)), axis=1)
+    model = UnionOperator(UnionConfig(), UnionMemory(a, b, union)).eval()
+    queries = 500
+    qa = (base_a * (1 + 1e-3 * rng.standard_normal((queries, 20)))).astype(np.float32)
+    qb = (base_b * (1 + 1e-3 * rng.standard_normal((queries, 20)))).astype(np.float32)
+    export_union(model, tmp_path / "union.onnx")
+    got, _ = session(tmp_path / "union.onnx").run(None, {"spectrum_a": qa, "spectrum_b": qb})
+    with torch.no_grad():
+        expected = model(torch.as_tensor(qa), torch.as_tensor(qb))[0].numpy()
+    assert np.abs(got - expected).max() <= 1e-4 * np.abs(expected).max()
