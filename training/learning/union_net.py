@@ -35,7 +35,7 @@ SIGMA_FLOOR = 1e-2  # the smallest relative σ (the pose noise floor is ~2 %)
 class UnionConfig:
     k: int = 20
     neighbours: int = 4
-    correction: str = "deepsets"  # a key of CORRECTIONS
+    correction: str = "transformer"  # a key of CORRECTIONS
     width: int = 256  # DeepSets hidden width
     embedding: int = 32  # transformer token width
     heads: int = 8
