@@ -73,7 +73,7 @@ def _pipeline(verb: str, data: Path, runs: Path, models: Path, preset: str, seed
         metrics = run_pipeline(data, runs, models, TRAINING_PRESETS[preset], seed, command, train=verb == "train")
     except UnfinishedRuns as error:
         raise typer.BadParameter(str(error), param_hint="--runs") from error
-    typer.echo(f"{verb}: {metrics['seconds']['total']} s; parity {metrics['parity_max_relative']}")
+    typer.echo(f"{verb}: {metrics['seconds']} s; parity {metrics['parity_max_relative']}")
 
 
 def main() -> None:

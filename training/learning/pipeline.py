@@ -126,7 +126,9 @@ def run_pipeline(
     metrics["retrieval"] = retrieval_table(data, retrieval_queries(data, union), complete, identity)
     metrics["parity_max_relative"] = parity
     metrics["union_validation_mae"] = [round(m, 3) for m in validation_history(runs / "union.pt")]
-    metrics["seconds"] = {"training": round(trained - started, 1), "total": round(time.perf_counter() - started, 1)}
+    total = round(time.perf_counter() - started, 1)
+    # An evaluation of finished runs says how long it took, never that training took that long.
+    metrics["seconds"] = {"training": round(trained - started, 1), "total": total} if train else {"evaluation": total}
     metrics["data"] = json.loads((data_dir / "manifest.json").read_text())
     (models / "metrics.json").write_text(json.dumps(metrics, indent=1))
     update_card(models / "MODEL_CARD.md", metrics, command)
