@@ -6,13 +6,14 @@ better union than the paper's transformer learned to predict on our data (valida
 relative error 7.8 % against 14.2 % at the same budget, and the transformer underfits: train
 13.2 %). So the operator carries its training pairs inside the model (:class:`UnionMemory`,
 exported as constants of the ONNX graph, so the service needs nothing else) and learns only
-the correction of those priors. The correction is a DeepSets network: one encoder φ reads each operand with the
-unions of the few nearest pairs, the two codes are summed (exactly commutative, as IEEE
-addition is), and a head ρ, which also sees how far those pairs are, returns the change of
-every log-eigenvalue of the nearest union. σ is the spread of the retrieved unions around the
-prediction, calibrated on validation data. It is trained
-leave-one-out, each training pair seeing the prior of its nearest *other* pair, as a new pair
-would.
+the correction of those priors. The correction is the paper's pair of transformers
+(:class:`TransformerCorrection`: T_A reads both operands in both orders, summed, so the
+operator commutes exactly; T_B decodes), reading the unions of the few nearest pairs and how
+far those pairs are, and returning the change of every log-eigenvalue of the nearest union;
+:class:`DeepSetsCorrection` is the cheaper comparison (validation mae 5.39 against 5.05, Test B
+mean relative error 12.4–13.3 % against 11.0–11.4 %). σ is the spread of the retrieved unions
+around the prediction, calibrated on validation data. It is trained leave-one-out, each
+training pair seeing the priors of its nearest *other* pairs, as a new pair would.
 
 Everything is in one common scale s, the mean of all 2k input eigenvalues, so the network sees
 the two parts' sizes relative to each other (never each part normalised on its own):
