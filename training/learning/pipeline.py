@@ -95,13 +95,13 @@ def run_pipeline(
     data = SpectralData(data_dir, seed=seed)
     union = train_union(data, runs / "union.pt", replace(preset.union, seed=seed), preset.union_model)
     settings = replace(preset.localizer, seed=seed)
-    identities = localizer_identities(data)
+    identities = {**localizer_identities(data), "per_vertex": None}  # the per-vertex head: all identities
     localizers: dict[str, Localizer] = {
         name: train_localizer(
             data,
             union,
             localizer_checkpoint(runs, name),
-            identities.get(name),  # the per-vertex head trains on all identities
+            identities[name],
             settings,
             # The comparison the basis head must stand: a full per-vertex output layer, same data.
             LocalizerConfig(basis=None) if name == "per_vertex" else None,
