@@ -115,7 +115,7 @@ class DeepSetsCorrection(nn.Module):
     The sum of the two codes is what makes it commutative: IEEE addition is, bit for bit.
     """
 
-    def __init__(self, config: "UnionConfig") -> None:
+    def __init__(self, config: UnionConfig) -> None:
         super().__init__()
         k, n, width = config.k, config.neighbours, config.width
         self.part = _mlp(k + n * k, width, width, config.dropout)  # φ(z(part), z(priors))
@@ -140,7 +140,7 @@ class TransformerCorrection(nn.Module):
     added to every token, and ρ maps each token to its Δzᵢ.
     """
 
-    def __init__(self, config: "UnionConfig") -> None:
+    def __init__(self, config: UnionConfig) -> None:
         super().__init__()
         k, n, d = config.k, config.neighbours, config.embedding
         self.k = k
@@ -154,12 +154,12 @@ class TransformerCorrection(nn.Module):
         nn.init.zeros_(self.rho.weight)  # start at the nearest prior
         nn.init.zeros_(self.rho.bias)
 
-    def _tokens(self, z: torch.Tensor, priors: torch.Tensor, role: int) -> torch.Tensor:
+    def _tokens(self, z: Tensor, priors: Tensor, role: int) -> Tensor:
         offsets = torch.diff(z, dim=1, prepend=torch.zeros_like(z[:, :1]))
         features = torch.cat([offsets[..., None], z[..., None], priors.transpose(1, 2)], dim=-1)
         return self.embed(features) + self.position + self.operand[role]
 
-    def _informed(self, first: torch.Tensor, second: torch.Tensor, priors: torch.Tensor) -> torch.Tensor:
+    def _informed(self, first: Tensor, second: Tensor, priors: Tensor) -> Tensor:
         tokens = torch.cat([self._tokens(first, priors, 0), self._tokens(second, priors, 1)], dim=1)
         return self.mixer(tokens)[:, : self.k]
 
