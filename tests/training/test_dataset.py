@@ -10,7 +10,8 @@ from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
 from tests.training.synthetic import SyntheticSource, synthetic_template
 from training.data.build import PRESETS, TEST_B_MAX_IOU, build_dataset
-from training.data.pairs import AREA_TIE, MIN_GAIN, symmetric_iou
+from training.data.overlaps import CAMERA, IDENTICAL, NESTED, RESCAN, TEST_C_GROUPS
+from training.data.pairs import AREA_TIE, MIN_GAIN, containment, symmetric_iou
 from training.data.regions import MAX_AREA_FRACTION, MIN_AREA_FRACTION, RegionSampler
 from training.data.spectra import region_mesh
 
@@ -51,7 +52,10 @@ def test_no_spectrum_failed(data):
 
 
 def test_every_part_is_one_component_with_a_boundary(data, sampler):
-    for index in np.unique(np.concatenate([data["mask_a"], data["mask_b"]])):
+    # Mask 0, the whole closed body, is a part only of nested rows: (A, whole body) → whole body.
+    assert set(data["scenario"][data["mask_b"] == 0]) <= {NESTED}
+    parts = np.unique(np.concatenate([data["mask_a"], data["mask_b"]]))
+    for index in parts[parts > 0]:
         mask = unpack(data, index)
         assert sampler.is_connected(mask)
         assert MIN_AREA_FRACTION <= sampler.area_fraction(mask) <= MAX_AREA_FRACTION
@@ -66,8 +70,9 @@ def test_union_is_the_or_of_its_parts(data):
             np.testing.assert_array_equal(unpack(data, union), both)
 
 
-def test_neither_part_contains_the_other(data, sampler):
-    for a, b, union in zip(data["mask_a"], data["mask_b"], data["mask_union"], strict=True):
+def test_neither_part_of_a_random_pair_contains_the_other(data, sampler):
+    random_pairs = np.isin(data["scenario"], ["full", "partial"])
+    for a, b, union in zip(*(data[c][random_pairs] for c in ("mask_a", "mask_b", "mask_union")), strict=True):
         gain = sampler.area_fraction(unpack(data, union)) - max(
             sampler.area_fraction(unpack(data, a)), sampler.area_fraction(unpack(data, b))
         )
@@ -75,8 +80,10 @@ def test_neither_part_contains_the_other(data, sampler):
 
 
 def test_minimum_union_area_rule(data, sampler):
+    """Every pair but a camera session's, whose union is what the scanner saw."""
     mirror = sampler.template.mirror
-    for a, b in zip(data["mask_a"], data["mask_b"], strict=True):
+    ruled = ~np.char.startswith(data["scenario"].astype(str), "camera")
+    for a, b in zip(data["mask_a"][ruled], data["mask_b"][ruled], strict=True):
         a, b = unpack(data, a), unpack(data, b)
         assert sampler.area_fraction(a | b) <= sampler.area_fraction(a | b[mirror]) + AREA_TIE
 
@@ -175,3 +182,42 @@ def test_sample_files_reproduce_their_stored_spectra_through_the_service_code(bu
         data = (built / "samples" / entry["file"]).read_bytes()
         report = spectrum_from_bytes(data, "ply", SpectrumOptions(k=PRESET.k))
         np.testing.assert_allclose(report.eigenvalues, entry["eigenvalues"], rtol=1e-8, err_msg=entry["file"])
+
+
+def test_overlap_rows_span_every_overlap_in_training(data, sampler):
+    train = data["split"] == "train"
+    shares = [
+        containment(sampler, unpack(data, a), unpack(data, b))
+        for a, b in zip(data["mask_a"][train], data["mask_b"][train], strict=True)
+    ]
+    counts = np.histogram(shares, bins=[0, 0.25, 0.75, 0.999, 1.001])[0]
+    assert np.all(counts > 0), counts
+
+
+def test_identical_rescan_and_nested_rows_read_existing_parts(data):
+    poses = PRESET.poses
+    for kind in (IDENTICAL, RESCAN, NESTED):
+        rows = np.flatnonzero(data["scenario"] == kind)
+        assert len(rows) and {"train", "test_a"} <= set(data["split"][rows])
+        for row in rows:
+            a, b, union = data["mask_a"][row], data["mask_b"][row], data["mask_union"][row]
+            same_identity = data["shape_a"][row] // poses == data["shape_b"][row] // poses
+            assert same_identity and (union == b if kind == NESTED else a == b == union)
+    identical = data["scenario"] == IDENTICAL
+    np.testing.assert_array_equal(data["spec_a"][identical], data["spec_b"][identical])  # literally one spectrum
+
+
+def test_camera_rows_and_test_c_chains_are_unions_of_views(data, built):
+    import json
+
+    identities = json.loads((built / "work" / "identities.json").read_text())
+    group_of_shape = np.repeat([m["group"] for m in identities], PRESET.poses)
+    camera = np.isin(data["scenario"], CAMERA)
+    test_c = data["split"] == "test_c"
+    assert camera[test_c].all() and set(data["scenario"][camera & (data["split"] == "train")]) == set(CAMERA)
+    assert set(group_of_shape[data["shape_a"][test_c]]) <= set(TEST_C_GROUPS)
+    assert len(data["chains"]) > 0
+    for chain in data["chains"]:
+        views = [unpack(data, m) for m in chain[1:6]]
+        for length, union in enumerate(chain[6:], start=2):
+            np.testing.assert_array_equal(unpack(data, union), np.any(views[:length], axis=0))

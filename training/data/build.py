@@ -22,8 +22,11 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
+from training.data.camera import scan_session
+from training.data.overlaps import CHAIN_COLUMNS, SESSION_VIEWS, TEST_C_GROUPS, derived_rows, session_rows
 from training.data.pairs import (
     FULL_COVERAGE,
+    OVERLAP,
     PARTIAL_UNION,
     Pair,
     sample_pair,
@@ -32,10 +35,12 @@ from training.data.pairs import (
     symmetric_iou,
 )
 from training.data.regions import RegionSampler
+from training.data.rows import Rows, poses_for
 from training.data.samples import export_samples
 from training.data.spectra import CLOUD, MESH, REMESHED, VARIANTS, task_spectrum
 from training.data.template import Template
 
+MASK_STREAMS = {"pair": 0, "candidate": 1, "triple": 1, "retrieval": 2, "overlap": 3}  # per-kind seed word
 TEST_B_MAX_IOU = 0.8  # a Test B union overlaps every training union (or its mirror) less than this
 TEST_B_TYPES = 30  # held-out union types, each realized by many different pairs
 SPLIT_ATTEMPTS = 20  # tries per wanted Test B pair
@@ -60,6 +65,15 @@ class Preset:
     chunk: int
     k: int = 20
     retrieval_pairs: int = 0  # full-coverage pairs on held-out poses and identities: identity queries only
+    # Pairs that overlap as scans do (training.data.overlaps): two parts of one region (training,
+    # and per Test A group), identical/rescan/nested pairs of each kind (training, per Test A
+    # group), and scanning sessions (training, and per Test C group).
+    overlap_pairs: int = 0
+    overlap_test: int = 0
+    derived_pairs: int = 0
+    derived_test: int = 0
+    train_sessions: int = 0
+    test_sessions: int = 0
 
 
 PRESETS = {
@@ -78,6 +92,12 @@ PRESETS = {
         cloud_parts=2,
         chunk=8,
         retrieval_pairs=5,
+        overlap_pairs=12,
+        overlap_test=1,
+        derived_pairs=4,
+        derived_test=1,
+        train_sessions=3,
+        test_sessions=1,
     ),
     "standard": Preset(
         "standard",
@@ -94,6 +114,12 @@ PRESETS = {
         cloud_parts=100,
         chunk=64,
         retrieval_pairs=1_000,
+        overlap_pairs=2_500,
+        overlap_test=30,
+        derived_pairs=1_500,
+        derived_test=30,
+        train_sessions=250,
+        test_sessions=40,
     ),
     "large": Preset(
         "large",
@@ -110,6 +136,12 @@ PRESETS = {
         cloud_parts=500,
         chunk=128,
         retrieval_pairs=10_000,
+        overlap_pairs=12_000,
+        overlap_test=100,
+        derived_pairs=7_500,
+        derived_test=100,
+        train_sessions=1_200,
+        test_sessions=150,
     ),
 }
 
@@ -177,7 +209,7 @@ def _mapped(path: str) -> np.ndarray:
 def draw_masks(template_dir: str, seed: int, chunk: int, kind: str, count: int) -> dict[str, np.ndarray]:
     """``count`` pairs (alternating scenarios) or triples, packed, from seed (seed, chunk)."""
     sampler = _sampler(template_dir)
-    rng = np.random.default_rng([seed, chunk, {"pair": 0, "candidate": 1, "triple": 1, "retrieval": 2}[kind]])
+    rng = np.random.default_rng([seed, chunk, MASK_STREAMS[kind]])
     rows: list[list[np.ndarray]] = []
     scenarios = []
     for i in range(count):
@@ -190,11 +222,29 @@ def draw_masks(template_dir: str, seed: int, chunk: int, kind: str, count: int) 
                 "pair": (FULL_COVERAGE, PARTIAL_UNION)[(chunk + i) % 2],
                 "candidate": PARTIAL_UNION,
                 "retrieval": FULL_COVERAGE,
+                "overlap": OVERLAP,
             }[kind]
             pair = sample_pair(sampler, rng, scenario)
             rows.append([pair.a, pair.b, pair.union])
             scenarios.append(scenario)
     return {"masks": np.packbits(np.array(rows), axis=-1), "scenario": np.array(scenarios)}
+
+
+@threadpool_limits.wrap(limits=1)
+def draw_sessions(template_dir: str, shapes_path: str, seed: int, chunk: int, shapes: np.ndarray) -> dict:
+    """A scanning session around each of ``shapes``, packed (count, views, bytes), from seed (seed, chunk)."""
+    sampler = _sampler(template_dir)
+    bodies = _mapped(shapes_path)
+    rng = np.random.default_rng([seed, chunk, 9])
+    n = len(sampler.template.vertices)
+    masks = np.zeros((len(shapes), SESSION_VIEWS, (n + 7) // 8), np.uint8)
+    ok = np.zeros(len(shapes), bool)
+    for row, shape in enumerate(shapes):
+        session = scan_session(sampler, np.asarray(bodies[shape], dtype=np.float64), rng)
+        if session is not None:
+            masks[row] = np.packbits([*session.orbit, session.rescan, session.close_up], axis=-1)
+            ok[row] = True
+    return {"masks": masks, "ok": ok}
 
 
 @threadpool_limits.wrap(limits=1)
@@ -262,7 +312,10 @@ def build_dataset(
     sampler = _sampler(str(template_dir))
     shapes_path, identities = _stage_shapes(source, preset, layout, seed)
     pairs, triples = _stage_masks(preset, layout, str(template_dir), seed, scheduler, workers)
-    table, masks = _stage_splits(preset, identities, pairs, triples, sampler, seed)
+    sessions = _stage_sessions(
+        preset, layout, identities, str(template_dir), str(shapes_path), seed, scheduler, workers
+    )
+    table, masks = _stage_splits(preset, identities, pairs, triples, sessions, sampler, seed)
     masks_path = layout.work / "masks.npy"
     np.save(masks_path, masks)
     spectra = _stage_spectra(
@@ -293,6 +346,7 @@ def _stage_masks(
         "candidate": test_groups * preset.test_pairs * 4,  # Test B picks its union types here
         "triple": preset.triples,
         "retrieval": preset.retrieval_pairs,
+        "overlap": preset.overlap_pairs + test_groups * preset.overlap_test,
     }
     results: dict[str, dict[str, np.ndarray]] = {}
     for kind, total in plan.items():
@@ -317,7 +371,48 @@ def _stage_masks(
             key: np.concatenate([p[key][:count] for p, count in zip(parts, counts, strict=True)])
             for key in ("masks", "scenario")
         }
-    return {kind: results[kind] for kind in ("pair", "candidate", "retrieval")}, results["triple"]
+    return {kind: results[kind] for kind in ("pair", "candidate", "retrieval", "overlap")}, results["triple"]
+
+
+def _stage_sessions(
+    preset: Preset,
+    layout: Layout,
+    identities: list[dict],
+    template_dir: str,
+    shapes_path: str,
+    seed: int,
+    scheduler: str | None,
+    workers: int | None,
+) -> dict[str, np.ndarray]:
+    """Scanning sessions on training bodies (known identities, training poses) and on Test C's
+    (identities never trained on, any pose), in resumable chunks."""
+    rng = np.random.default_rng([seed, 8])
+    plan: list[tuple[int, str, str]] = []
+    for split, groups, count in (("train", ("known_man", "known_woman"), preset.train_sessions),) + tuple(
+        ("test_c", (group,), preset.test_sessions) for group in TEST_C_GROUPS
+    ):
+        for _ in range(count):
+            group = str(rng.choice(groups))
+            identity = int(rng.choice([i for i, m in enumerate(identities) if m["group"] == group]))
+            pose = int(rng.choice(poses_for(split, group, preset.poses, preset.test_poses)))
+            plan.append((identity * preset.poses + pose, split, group))
+    shapes = np.array([p[0] for p in plan], dtype=np.int64)
+    starts = list(range(0, len(plan), preset.chunk))
+    missing = [i for i in range(len(starts)) if not layout.chunk("session", i).exists()]
+
+    def save(index: int, result: dict) -> None:
+        np.savez(layout.chunk("session", missing[index]), **result)
+
+    arguments = [(template_dir, shapes_path, seed, i, shapes[starts[i] : starts[i] + preset.chunk]) for i in missing]
+    run_tasks(draw_sessions, arguments, save, scheduler, workers, "sessions")
+    parts = [np.load(layout.chunk("session", i)) for i in range(len(starts))]
+    return {
+        "masks": np.concatenate([p["masks"] for p in parts]) if parts else np.zeros((0, SESSION_VIEWS, 0), np.uint8),
+        "ok": np.concatenate([p["ok"] for p in parts]) if parts else np.zeros(0, bool),
+        "shape": shapes,
+        "split": np.array([p[1] for p in plan]),
+        "group": np.array([p[2] for p in plan]),
+    }
 
 
 def _chunk_rows(path: Path) -> int:
@@ -329,41 +424,30 @@ def _chunk_rows(path: Path) -> int:
 
 
 def _stage_splits(
-    preset: Preset, identities: list[dict], pairs: dict, triples: dict, sampler: RegionSampler, seed: int
+    preset: Preset,
+    identities: list[dict],
+    pairs: dict,
+    triples: dict,
+    sessions: dict,
+    sampler: RegionSampler,
+    seed: int,
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Assign pairs to shapes and splits; Test B realizes held-out union types with new pairs."""
     rng = np.random.default_rng([seed, 2])
     template = sampler.template
     n = len(template.vertices)
-    masks: list[np.ndarray] = [np.packbits(np.ones(n, bool))]  # mask 0: the whole body
-    rows: dict[str, list] = {
-        key: []
-        for key in ("split", "group", "scenario", "variant", "shape_a", "shape_b", "mask_a", "mask_b", "mask_union")
-    }
-
-    def add_mask(packed: np.ndarray) -> int:
-        masks.append(packed)
-        return len(masks) - 1
+    writer = Rows([np.packbits(np.ones(n, bool))])  # mask 0: the whole body
+    add_mask = writer.mask
 
     def add(split: str, group: str, scenario: str, packed: np.ndarray, draw: np.random.Generator = rng) -> None:
         identity = int(draw.choice([i for i, m in enumerate(identities) if m["group"] == group]))
-        pose_pool = _poses_for(split, group, preset)
+        pose_pool = poses_for(split, group, preset.poses, preset.test_poses)
         pose_a = int(draw.choice(pose_pool))
         pose_b = pose_a if draw.random() < 0.5 else int(draw.choice(pose_pool))
         a, b = add_mask(packed[0]), add_mask(packed[1])
         union = 0 if scenario == FULL_COVERAGE else add_mask(packed[2])
-        for key, value in (
-            ("split", split),
-            ("group", group),
-            ("scenario", scenario),
-            ("variant", MESH),
-            ("shape_a", identity * preset.poses + pose_a),
-            ("shape_b", identity * preset.poses + pose_b),
-            ("mask_a", a),
-            ("mask_b", b),
-            ("mask_union", union),
-        ):
-            rows[key].append(value)
+        shapes = (identity * preset.poses + pose_a, identity * preset.poses + pose_b)
+        writer.put(split, group, scenario, MESH, shapes, (a, b, union))
 
     test_groups = ["known_man", "known_woman", "unknown_man", "unknown_woman", "child"]
     pair_masks, pair_scenarios = pairs["pair"]["masks"], pairs["pair"]["scenario"]
@@ -383,17 +467,36 @@ def _stage_splits(
     for group in test_groups:
         for pair in _realizations(sampler, held_out, preset.test_pairs, test_b_rng):
             add("test_b", group, PARTIAL_UNION, np.packbits([pair.a, pair.b, pair.union], axis=-1), test_b_rng)
-    table = {key: np.array(value) for key, value in rows.items()}
-    table = _with_variants(table, preset, rng)
+    table = _with_variants(writer.take(), preset, rng)
     table["triples"] = _triple_rows(triples, preset, identities, rng, add_mask)
-    # Appended last, from their own stream: the rows above stay as they were without them.
-    rows = {key: [] for key in rows}
+    # Appended last, from their own streams: the rows above stay as they were without them.
     retrieval_rng = np.random.default_rng([seed, 4])
     for i, packed in enumerate(pairs["retrieval"]["masks"]):
         add("retrieval", test_groups[i % len(test_groups)], FULL_COVERAGE, packed, retrieval_rng)
-    if rows["split"]:
-        table.update({key: np.concatenate([table[key], np.array(values)]) for key, values in rows.items()})
-    return table, np.array(masks)
+    table = _appended(table, writer.take())
+    overlap_rng = np.random.default_rng([seed, 5])
+    overlap_masks = pairs["overlap"]["masks"]
+    for i in range(preset.overlap_pairs):
+        add("train", str(overlap_rng.choice(["known_man", "known_woman"])), OVERLAP, overlap_masks[i], overlap_rng)
+    for g, group in enumerate(test_groups):
+        for packed in overlap_masks[preset.overlap_pairs + g * preset.overlap_test :][: preset.overlap_test]:
+            add("test_a", group, OVERLAP, packed, overlap_rng)
+    poses = (preset.poses, preset.test_poses)
+    counts = {"train": preset.derived_pairs, "test_a": preset.derived_test}
+    derived_rows(writer, table, poses, counts, np.random.default_rng([seed, 6]))
+    chains = session_rows(writer, sampler, sessions, poses, np.random.default_rng([seed, 7]))
+    extension = writer.take()
+    table = _appended(table, _remeshed_copies(extension))
+    table["triples"] = np.concatenate([table["triples"], chains.triples])
+    table["chains"] = chains.test
+    return table, np.array(writer.masks)
+
+
+def _appended(table: dict[str, np.ndarray], rows: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``table`` with ``rows`` (same columns) after its own; the other tables of it kept."""
+    if not len(rows["split"]):
+        return table
+    return {key: np.concatenate([value, rows[key]]) if key in rows else value for key, value in table.items()}
 
 
 def _unpack(packed: np.ndarray, n: int) -> np.ndarray:
@@ -430,26 +533,27 @@ def _realizations(sampler: RegionSampler, unions: list[np.ndarray], count: int, 
     return pairs
 
 
-def _poses_for(split: str, group: str, preset: Preset) -> range:
-    train_poses = range(preset.poses - preset.test_poses)
-    if split == "train":
-        return train_poses
-    if group.startswith("known"):
-        return range(preset.poses - preset.test_poses, preset.poses)
-    return range(preset.poses)
-
-
 def _with_variants(table: dict[str, np.ndarray], preset: Preset, rng: np.random.Generator) -> dict[str, np.ndarray]:
     """Every test row again re-meshed, and some as point clouds (parts only; unions stay meshes)."""
     test = np.flatnonzero(table["split"] != "train")
     clouds = rng.choice(test, size=min(preset.cloud_parts, len(test)), replace=False)
-    extra = [(test, REMESHED), (np.sort(clouds), CLOUD)]
-    out = {key: value for key, value in table.items()}
-    for rows, variant in extra:
-        for key in out:
-            addition = np.full(len(rows), variant) if key == "variant" else table[key][rows]
-            out[key] = np.concatenate([out[key], addition])
-    return out
+    return _copies(_copies(table, test, REMESHED), np.sort(clouds), CLOUD, table)
+
+
+def _remeshed_copies(table: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Every test row again with both parts re-meshed (the union stays the mesh's)."""
+    return _copies(table, np.flatnonzero(table["split"] != "train"), REMESHED)
+
+
+def _copies(
+    table: dict[str, np.ndarray], rows: np.ndarray, variant: str, source: dict[str, np.ndarray] | None = None
+) -> dict[str, np.ndarray]:
+    """``table`` followed by ``rows`` of ``source`` (default: of ``table``) in ``variant``."""
+    source = table if source is None else source
+    return {
+        key: np.concatenate([value, np.full(len(rows), variant) if key == "variant" else source[key][rows]])
+        for key, value in table.items()
+    }
 
 
 def _triple_rows(
@@ -465,7 +569,7 @@ def _triple_rows(
     for packed in triples["masks"]:
         test = rng.random() < 0.15
         identity = int(rng.choice(known))
-        pose = int(rng.choice(_poses_for("test_a" if test else "train", "known_man", preset)))
+        pose = int(rng.choice(poses_for("test_a" if test else "train", "known_man", preset.poses, preset.test_poses)))
         rows.append([int(test), identity * preset.poses + pose, *[add_mask(m) for m in packed]])
     return np.array(rows, dtype=np.int64).reshape(-1, 7)
 
@@ -479,6 +583,8 @@ def _spectrum_tasks(table: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarra
         (table["shape_b"], table["mask_b"], parts_variant),
         (table["shape_a"], table["mask_union"], np.full(len(parts_variant), MESH)),
     ] + [(triples[:, 1], triples[:, column], np.full(len(triples), MESH)) for column in range(2, 7)]
+    chains = table["chains"]
+    cells += [(chains[:, 0], chains[:, column], np.full(len(chains), MESH)) for column in range(1, CHAIN_COLUMNS)]
     shapes = np.concatenate([c[0] for c in cells])
     masks = np.concatenate([c[1] for c in cells])
     variants = np.concatenate([c[2] for c in cells]).astype(str)
@@ -564,7 +670,9 @@ def _write(
         "spec_b": cell[n_rows : 2 * n_rows],
         "spec_union": cell[2 * n_rows : 3 * n_rows],
     }
-    triple_spectra = cell[3 * n_rows :].reshape(5, n_triples).T
+    triple_spectra = cell[3 * n_rows : 3 * n_rows + 5 * n_triples].reshape(5, n_triples).T
+    n_chains = len(table["chains"])
+    chain_spectra = cell[3 * n_rows + 5 * n_triples :].reshape(CHAIN_COLUMNS - 1, n_chains).T
     np.savez_compressed(
         out / "dataset.npz",
         masks=masks,
@@ -574,7 +682,9 @@ def _write(
         spectrum_variant=spectra["variant"],
         triples=table["triples"],
         triple_spectra=triple_spectra,
-        **{key: value for key, value in table.items() if key != "triples"},
+        chains=table["chains"],
+        chain_spectra=chain_spectra,
+        **{key: value for key, value in table.items() if key not in ("triples", "chains")},
         **columns,
     )
     failed = int(np.isnan(spectra["values"]).any(axis=1).sum())
@@ -589,6 +699,7 @@ def _write(
         "shapes": len(identities) * preset.poses,
         "rows": n_rows,
         "triples": n_triples,
+        "test_c_chains": n_chains,
         "distinct_masks": len(masks),
         "test_b_union_types": len(np.unique(masks[table["mask_union"][table["split"] == "test_b"]], axis=0)),
         "spectra": len(spectra["values"]),

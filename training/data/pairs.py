@@ -14,8 +14,9 @@ from training.data.regions import MAX_AREA_FRACTION, RegionSampler
 
 FULL_COVERAGE = "full"
 PARTIAL_UNION = "partial"
+OVERLAP = "overlap"  # two parts of one region, overlapping anywhere from a band to nesting
 AREA_TIE = 1e-3  # union areas closer than this fraction of the body are a tie
-MIN_GAIN = 0.02  # each part adds at least this fraction of the body to the other: no nested pairs
+MIN_GAIN = 0.02  # full and partial pairs: each part adds this much of the body to the other (overlap pairs nest)
 
 
 @dataclass(frozen=True)
@@ -81,7 +82,7 @@ def partial_union_pair(sampler: RegionSampler, rng: np.random.Generator) -> Pair
 
 def sample_pair(sampler: RegionSampler, rng: np.random.Generator, scenario: str) -> Pair:
     """Rejection-sample a pair of the given scenario."""
-    draw = full_coverage_pair if scenario == FULL_COVERAGE else partial_union_pair
+    draw = {FULL_COVERAGE: full_coverage_pair, PARTIAL_UNION: partial_union_pair, OVERLAP: overlap_pair}[scenario]
     while True:
         pair = draw(sampler, rng)
         if pair is not None:
@@ -100,6 +101,23 @@ def sample_triple(sampler: RegionSampler, rng: np.random.Generator) -> tuple[Pai
             return first, second
 
 
+def _field(sampler: RegionSampler, rng: np.random.Generator) -> np.ndarray:
+    """A random low-frequency field on the template: where two parts of one union are cut apart."""
+    count = int(rng.integers(1, 10))
+    return sampler.basis[:, 1 : count + 1] @ rng.standard_normal(count)
+
+
+def _cut(sampler: RegionSampler, union: np.ndarray, field: np.ndarray, low: float, high: float) -> Pair | None:
+    """A keeps the field's low side up to quantile ``high``, B its high side from ``low``; the band
+    between the two quantiles is their overlap. None if a side is not an admissible region."""
+    levels = np.quantile(field[union], [low, high])
+    a = sampler.clean(union & (field <= levels[1]))
+    b = sampler.clean(union & (field >= levels[0]))
+    if a is None or b is None or not np.array_equal(a | b, union):
+        return None
+    return resolve_symmetry(sampler, a, b)
+
+
 def split_union(sampler: RegionSampler, union: np.ndarray, rng: np.random.Generator) -> Pair | None:
     """Two overlapping parts whose union is exactly ``union`` (or its mirror image), or None.
 
@@ -107,17 +125,32 @@ def split_union(sampler: RegionSampler, union: np.ndarray, rng: np.random.Genera
     and the band between them is where they overlap. This is how Test B realizes one held-out
     union type many times, by parts that differ from row to row.
     """
-    count = int(rng.integers(1, 10))
-    field = sampler.basis[:, 1 : count + 1] @ rng.standard_normal(count)
+    field = _field(sampler, rng)
     low = rng.uniform(0.2, 0.6)
-    levels = np.quantile(field[union], [low, low + rng.uniform(0.1, 0.3)])
-    a = sampler.clean(union & (field <= levels[1]))
-    b = sampler.clean(union & (field >= levels[0]))
-    if a is None or b is None or not np.array_equal(a | b, union):
+    pair = _cut(sampler, union, field, low, low + rng.uniform(0.1, 0.3))
+    if pair is None:
         return None
-    pair = resolve_symmetry(sampler, a, b)
     same = np.array_equal(pair.union, union) or np.array_equal(pair.union, union[sampler.template.mirror])
     return pair if same and pair.scenario == PARTIAL_UNION and adds_to_both(sampler, pair) else None
+
+
+def overlap_pair(sampler: RegionSampler, rng: np.random.Generator) -> Pair | None:
+    """Two parts of one random region overlapping by anything from a thin band to all of the
+    smaller one: the low quantile runs from 0 (B is the whole region, A inside it) to ½, the
+    high one from just above it to 1. Consecutive scans overlap like this; random pairs don't."""
+    union = sampler.sample(rng).mask
+    low = rng.uniform(0.0, 0.5) if rng.random() < 0.8 else 0.0
+    high = rng.uniform(low + 0.02, 1.0)
+    pair = _cut(sampler, union, _field(sampler, rng), low, high)
+    if pair is None or pair.scenario != PARTIAL_UNION or sampler.area_fraction(pair.union) > MAX_AREA_FRACTION:
+        return None
+    return pair if sampler.is_connected(pair.union) else None
+
+
+def containment(sampler: RegionSampler, a: np.ndarray, b: np.ndarray) -> float:
+    """The share of the smaller part's area that lies inside the other part (0 … 1)."""
+    smaller = min(sampler.area_fraction(a), sampler.area_fraction(b))
+    return sampler.area_fraction(a & b) / max(smaller, 1e-12)
 
 
 def symmetric_iou(masks: np.ndarray, others: np.ndarray, weights: np.ndarray, mirror: np.ndarray) -> np.ndarray:
