@@ -8,6 +8,8 @@ torch = pytest.importorskip("torch")
 
 from training.learning.localizer_net import Localizer, LocalizerConfig, feature_statistics  # noqa: E402
 from training.learning.union_net import (  # noqa: E402
+    MONOTONE,
+    PRIOR,
     UnionConfig,
     UnionMemory,
     UnionOperator,
@@ -22,14 +24,15 @@ def spectra(count: int, seed: int) -> torch.Tensor:
 
 
 CORRECTIONS = ("deepsets", "transformer")
+PARAMETRIZATIONS = (PRIOR, MONOTONE)
 
 
-def operator(correction: str, seed: int = 0, stored: int = 50) -> UnionOperator:
+def operator(correction: str, seed: int = 0, stored: int = 50, parametrization: str = MONOTONE) -> UnionOperator:
     """An operator with random weights (the correction's zero-initialised last layer too) over a
     random memory."""
     memory = UnionMemory(spectra(stored, 100 + seed), spectra(stored, 200 + seed), spectra(stored, 300 + seed) / 2)
     torch.manual_seed(seed)
-    model = UnionOperator(UnionConfig(correction=correction), memory)
+    model = UnionOperator(UnionConfig(correction=correction, parametrization=parametrization), memory)
     last = model.correction.rho if correction == "transformer" else model.correction.head[-1]
     torch.nn.init.normal_(last.weight, std=0.05)
     return model.eval()
@@ -56,7 +59,7 @@ def test_memory_returns_the_nearest_other_pairs_in_order():
     a, b, union = spectra(30, 13), spectra(30, 14), spectra(30, 15)
     memory = UnionMemory(a, b, union)
     za, zb = relative_logs(a, b)
-    priors, distances = memory(a, b, 3, torch.arange(30))
+    priors, distances = memory(a, b, 3, torch.eye(30, dtype=torch.bool))
     forward = torch.cdist(torch.cat([za, zb], 1), memory.keys)
     backward = torch.cdist(torch.cat([zb, za], 1), memory.keys)
     expected, nearest = torch.minimum(forward, backward).fill_diagonal_(torch.inf).topk(3, largest=False)
@@ -68,15 +71,44 @@ def test_memory_returns_the_nearest_other_pairs_in_order():
 def test_an_untrained_operator_returns_the_prior(correction):
     """The correction starts at zero: before training, the operator is the nearest-pair lookup."""
     a, b, union = spectra(30, 16), spectra(30, 17), spectra(30, 18)
-    model = UnionOperator(UnionConfig(correction=correction), UnionMemory(a, b, union)).eval()
+    config = UnionConfig(correction=correction, parametrization=PRIOR)
+    model = UnionOperator(config, UnionMemory(a, b, union)).eval()
     with torch.no_grad():
         predicted, _ = model(b * 3, a * 3)
     torch.testing.assert_close(predicted, union * 3, rtol=1e-4, atol=1e-3)
 
 
 @pytest.mark.parametrize("correction", CORRECTIONS)
-def test_union_is_exactly_commutative_and_non_decreasing(correction):
-    model = operator(correction)
+def test_an_untrained_monotone_operator_returns_the_prior_below_the_minimum(correction):
+    """Monotone: a prior well below min(a, b) comes back as it is; one above it is cut to it."""
+    a, b = spectra(30, 16), spectra(30, 17)
+    floor = torch.minimum(a, b)
+    union = floor * torch.where(torch.arange(20) % 2 == 0, 0.5, 1.5)  # even indices below, odd above
+    model = UnionOperator(UnionConfig(correction=correction), UnionMemory(a, b, union)).eval()
+    with torch.no_grad():
+        predicted, _ = model(b * 3, a * 3)
+    expected = torch.sort(torch.minimum(union, floor), dim=1).values * 3
+    torch.testing.assert_close(predicted, expected, rtol=1e-2, atol=1e-2)
+
+
+@pytest.mark.parametrize("correction", CORRECTIONS)
+def test_a_monotone_union_is_never_above_either_part_whatever_its_weights(correction):
+    """λᵢ(A ∪ B) ≤ min(λᵢ(A), λᵢ(B)) by construction: random weights, random operands."""
+    for seed in range(3):
+        model = operator(correction, seed)
+        for name, parameter in model.correction.named_parameters():
+            if "weight" in name and parameter.dim() > 1:
+                torch.nn.init.normal_(parameter, std=0.5)
+        a, b = spectra(64, 10 + seed), spectra(64, 20 + seed) * (0.2 + seed)
+        with torch.no_grad():
+            union, _ = model(a, b)
+        assert (union <= torch.minimum(a, b) * (1 + 1e-5)).all()
+
+
+@pytest.mark.parametrize("parametrization", PARAMETRIZATIONS)
+@pytest.mark.parametrize("correction", CORRECTIONS)
+def test_union_is_exactly_commutative_and_non_decreasing(correction, parametrization):
+    model = operator(correction, parametrization=parametrization)
     a, b = spectra(64, 1), spectra(64, 2)
     with torch.no_grad():
         ab, sigma_ab = model(a, b)

@@ -51,6 +51,16 @@ class TripleTable:
     union_mask: np.ndarray
 
 
+@dataclass(frozen=True)
+class ChainTable:
+    """Test C chains of consecutive session views: spectra (c, views, k) of the views and
+    (c, views − 1, k) of the unions of their prefixes (views 0…1, 0…2, …), and the shapes."""
+
+    views: np.ndarray
+    unions: np.ndarray
+    shape: np.ndarray
+
+
 class SpectralData:
     """One built data set directory, loaded once."""
 
@@ -90,6 +100,10 @@ class SpectralData:
             test=arrays["triples"][finite, 0].astype(bool),
             union_mask=arrays["triples"][finite, 6],
         )
+        chain_spectra = spectra[arrays["chain_spectra"]]  # (c, 9, k): 5 views, then 4 prefix unions
+        whole = np.isfinite(chain_spectra).all(axis=(1, 2))
+        views = (chain_spectra.shape[1] + 1) // 2
+        self.chains = ChainTable(chain_spectra[whole, :views], chain_spectra[whole, views:], arrays["chains"][whole, 0])
 
     def identity_of(self, shape: np.ndarray) -> np.ndarray:
         return shape // self.shapes_per_identity

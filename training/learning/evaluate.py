@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from training.data.overlaps import CAMERA
+from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION
 from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
 from training.learning.baselines import UnionLookup, elementwise_min, larger_part
 from training.learning.data import PairTable, SpectralData
@@ -22,6 +24,11 @@ from training.learning.union_net import UnionOperator
 GROUPS = ("known_man", "unknown_man", "unknown_woman", "known_woman", "child")
 SPLITS = ("test_a", "test_b")
 NOISE_FLOOR_REGIONS = 100
+# Overlap strata: how much of the smaller part lies inside the other. "identical" is one spectrum
+# twice (same region, body and meshing), "same_region" the region again in another pose or meshing.
+STRATA = ("identical", "same_region", "nested", "over_75", "25_to_75", "under_25")
+NESTED_SHARE = 0.98  # a smaller part this much inside the other is nested (template masks of views are
+# cut along triangle edges, so a close-up a camera takes inside a far view may poke out by a face)
 
 # The paper's figures (its Tables 1-3), keyed like our rows: (mse, mae) and (IoU %, accuracy %).
 PAPER_UNION = {
@@ -101,7 +108,7 @@ class Evaluator:
         self.lookup = UnionLookup(train.a, train.b, train.union)
         self.areas = self.data.vertex_area
 
-    def row(self, rows: PairTable) -> dict:
+    def row(self, rows: PairTable, localization: bool = True) -> dict:
         mean, sigma = predict(self.union, rows.a, rows.b)
         methods = {
             "operator": mean,
@@ -113,11 +120,77 @@ class Evaluator:
         }
         out: dict = {"rows": len(rows), "union": {name: spectral_errors(p, rows.union) for name, p in methods.items()}}
         out["interval_coverage"] = float(np.mean(np.abs(mean - rows.union) <= INTERVAL_Z * sigma))
+        out["above_minimum"] = float(np.mean(mean > np.minimum(rows.a, rows.b) * (1 + 1e-6)))
+        if not localization:
+            return out
         truth = self.data.masks(rows.mask_union)
         out["localization"] = {}
         for name, model in self.localizers.items():
             iou, accuracy = symmetric_scores(localize(model, mean), truth, self.areas, self.data.template.mirror)
             out["localization"][name] = {"iou": float(iou.mean()), "accuracy": float(accuracy.mean())}
+        return out
+
+    def strata(self, rows: PairTable) -> np.ndarray:
+        """The overlap stratum (a name of ``STRATA``) of every row."""
+        a, b = self.data.masks(rows.mask_a), self.data.masks(rows.mask_b)
+        inside = (a & b) @ self.areas / np.maximum(np.minimum(a @ self.areas, b @ self.areas), 1e-12)
+        same_region = rows.mask_a == rows.mask_b
+        identical = same_region & (rows.shape_a == rows.shape_b) & (rows.variant == MESH)
+        labels = np.select(
+            [identical, same_region, inside >= NESTED_SHARE, inside > 0.75, inside >= 0.25],
+            list(STRATA[:5]),
+            default=STRATA[5],
+        )
+        return labels
+
+    def stratified(self, rows: PairTable, prefix: str) -> dict:
+        """:meth:`row` per overlap stratum and variant, keyed ``prefix/stratum/variant``."""
+        labels = self.strata(rows)
+        out = {}
+        for stratum in STRATA:
+            for variant in (MESH, REMESHED):
+                selection = np.flatnonzero((labels == stratum) & (rows.variant == variant))
+                if len(selection):
+                    out[f"{prefix}/{stratum}/{variant}"] = self.row(rows.rows(selection))
+        return out
+
+    def camera_kinds(self, rows: PairTable) -> dict:
+        """Operator and baselines per kind of session pair (mesh parts): what a scanner sends."""
+        out = {}
+        for kind in CAMERA:
+            selection = np.flatnonzero((rows.scenario == kind) & (rows.variant == MESH))
+            if len(selection):
+                chosen = rows.rows(selection)
+                out[kind] = {"rows": len(chosen), "union": self.row(chosen, localization=False)["union"]}
+        return out
+
+    def session_chains(self) -> dict:
+        """Test C: views 0…n−1 of a session folded left by the operator, n = 3, 4, 5, against the
+        true union of the n views; and the associativity gap of the operator on views 0, 1, 2."""
+        chains = self.data.chains
+        out: dict = {}
+        if not len(chains.shape):
+            return out
+        views = chains.views
+        current = {"operator": views[:, 0], "lookup": views[:, 0]}
+        sigma = np.zeros_like(views[:, 0])
+        for length in range(2, views.shape[1] + 1):
+            step = views[:, length - 1]
+            current["operator"], sigma = predict(self.union, current["operator"], step)
+            current["lookup"] = self.lookup.predict(current["lookup"], step)
+            if length < 3:
+                continue
+            truth = chains.unions[:, length - 2]
+            methods = {**current, "elementwise_min": views[:, :length].min(axis=1)}
+            out[str(length)] = {
+                "rows": len(truth),
+                "union": {name: spectral_errors(p, truth) for name, p in methods.items()},
+                "interval_coverage": float(np.mean(np.abs(current["operator"] - truth) <= INTERVAL_Z * sigma)),
+            }
+        left = predict(self.union, predict(self.union, views[:, 0], views[:, 1])[0], views[:, 2])[0]
+        right = predict(self.union, views[:, 0], predict(self.union, views[:, 1], views[:, 2])[0])[0]
+        gap = np.abs(left - right) / np.maximum(np.abs(right), 1e-6)
+        out["associativity"] = {"rows": len(gap), "mean_relative_gap": float(gap[:, 1:].mean())}
         return out
 
     def chains(self) -> dict:
@@ -159,15 +232,21 @@ def evaluate(data: SpectralData, union: UnionOperator, localizers: dict[str, Loc
     """metrics.json's content: every test row, chains, point clouds and the noise floor."""
     evaluator = Evaluator(data, union, localizers)
     pairs = data.pairs
+    random_pairs = np.isin(pairs.scenario, [FULL_COVERAGE, PARTIAL_UNION])  # the paper's kinds of pair
     rows = {}
     for split in SPLITS:
         for group in GROUPS:
             for variant in (MESH, REMESHED, CLOUD):
                 selection = (pairs.split == split) & (pairs.group == group) & (pairs.variant == variant)
-                if selection.any():
+                if (selection := selection & random_pairs).any():
                     rows[f"{split}/{group}/{variant}"] = evaluator.row(pairs.rows(np.flatnonzero(selection)))
+    test_c = pairs.rows(np.flatnonzero(pairs.split == "test_c"))
+    overlapping_a = pairs.rows(np.flatnonzero((pairs.split == "test_a") & ~random_pairs))
     return {
         "rows": rows,
+        "strata": {**evaluator.stratified(test_c, "test_c"), **evaluator.stratified(overlapping_a, "test_a")},
+        "test_c_kinds": evaluator.camera_kinds(test_c),
+        "test_c_chains": evaluator.session_chains(),
         "chains": evaluator.chains(),
         "noise_floor": evaluator.noise_floor(),
         "paper": {"union": PAPER_UNION, "localization": PAPER_IOU},

@@ -102,9 +102,9 @@ def train_localizer(
     selected = np.flatnonzero(train_rows)
     train = pairs.rows(selected)
     validation = pairs.rows(np.flatnonzero(pairs.split == "validation"))
-    # Leave-one-out unions: what the operator predicts for pairs it has not stored.
-    own = np.searchsorted(memory_rows(data), selected)
-    spectra, mask_ids, noisy = _samples(data, train, predict(union, train.a, train.b, own)[0])
+    # Leave-one-body-out unions: what the operator predicts for pairs of a body it has not stored.
+    bodies = data.pairs.shape_a[memory_rows(data)]
+    spectra, mask_ids, noisy = _samples(data, train, predict(union, train.a, train.b, (bodies, train.shape_a))[0])
     functions, areas = template_basis(data, config.basis or 1)
     mean, std = feature_statistics(spectra)
     model = Localizer(config, functions, mean, std).to(device)
@@ -121,7 +121,7 @@ def train_localizer(
         progress, best = load_checkpoint(checkpoint, model, optimizer, schedule, generator)
     weights = torch.as_tensor(areas / areas.sum(), dtype=torch.float32, device=device)
     mirror = torch.as_tensor(data.template.mirror, device=device)
-    validation_spectra = predict(union, validation.a, validation.b)[0]
+    validation_spectra = predict(union, validation.a, validation.b, (bodies, validation.shape_a))[0]
     validation_masks = data.masks(validation.mask_union)
     steps = max(1, len(spectra) // settings.batch)
     epochs = progress.remaining(settings.epochs, settings.patience)

@@ -1,11 +1,15 @@
 """Train the union operator's correction on pairs and on chains (A ∪ B) ∪ C of the data set.
 
 The operator's memory holds the training pairs (validation excluded); every training pair is
-predicted leave-one-out, its own memory row hidden, so the correction learns what a prior from
-*another* pair gets wrong. Every step also sees a smaller batch of chains whose inner union is
-the operator's *own prediction*, so errors are trained not to grow along a chain. Inputs get a
-small multiplicative jitter (the spectrum of a fixed region moves ~1 % across poses). The best
-epoch by validation mae is kept; σ is calibrated on the validation rows at the end.
+predicted leave-one-body-out, every memory row cut from the same posed body hidden, so the
+correction learns what a prior from *another* body gets wrong. Hiding the own row alone is not
+enough since pairs overlap as scans do: a pair's identical, re-scanned and nested siblings and
+the other views of its scanning session are all cut from its body, and their unions are its
+union or nearly, which no pair of a new body has in the memory. Every step also sees a smaller
+batch of chains whose inner union is the operator's *own prediction*, so errors are trained not
+to grow along a chain. Inputs get a small multiplicative jitter (the spectrum of a fixed region
+moves ~1 % across poses). The best epoch by validation mae is kept; σ is calibrated on the
+validation rows at the end.
 """
 
 from dataclasses import asdict, dataclass, replace
@@ -26,6 +30,7 @@ from training.learning.fit import (
     snapshot,
 )
 from training.learning.union_net import (
+    MONOTONE,
     UnionConfig,
     UnionMemory,
     UnionOperator,
@@ -64,6 +69,11 @@ def memory_rows(data: SpectralData) -> np.ndarray:
     return np.flatnonzero(data.pairs.split == "train")
 
 
+def same_body(memory_bodies: torch.Tensor, bodies: torch.Tensor) -> torch.Tensor:
+    """(B, rows) which memory rows are cut from each query's body (shape A's index)."""
+    return memory_bodies[None, :] == bodies[:, None]
+
+
 def _case_loss(mean: torch.Tensor, truth: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
     """Squared error of the relative logs z = log(λ / s + ε).
 
@@ -77,11 +87,11 @@ def _case_loss(mean: torch.Tensor, truth: torch.Tensor, scale: torch.Tensor) -> 
 def _losses(
     model: UnionOperator,
     pairs: tuple[torch.Tensor, ...],
-    own_rows: torch.Tensor,
+    hidden: torch.Tensor,
     chains: tuple[torch.Tensor, ...] | None,
 ) -> torch.Tensor:
     a, b, union = pairs
-    total = _case_loss(model(a, b, own_rows)[0], union, common_scale(a, b))
+    total = _case_loss(model(a, b, hidden)[0], union, common_scale(a, b))
     if chains is not None:
         a, b, c, ab, abc = chains
         inner = model(a, b)[0]
@@ -92,32 +102,68 @@ def _losses(
 
 @torch.no_grad()
 def predict(
-    model: UnionOperator, a: np.ndarray, b: np.ndarray, exclude: np.ndarray | None = None, batch: int = 1024
+    model: UnionOperator,
+    a: np.ndarray,
+    b: np.ndarray,
+    bodies: tuple[np.ndarray, np.ndarray] | None = None,
+    batch: int = 1024,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(union, σ) for numpy operands, in eval mode, on the model's device.
 
-    ``exclude`` gives each row's own memory row when the rows are training pairs: their
-    predictions are then leave-one-out, like those of pairs the operator has never seen.
+    ``bodies`` (the memory rows' bodies, the queries' bodies) hides from each query the memory
+    rows cut from its body: predictions of training or validation pairs are then those of a new
+    body, like the test pairs'.
     """
     model.eval()
     device = next(model.parameters()).device
     means, sigmas = [], []
+    memory_bodies = None if bodies is None else torch.as_tensor(bodies[0], device=device)
     for start in range(0, len(a), batch):
         window = slice(start, start + batch)
-        own = None if exclude is None else torch.as_tensor(exclude[window], device=device)
-        mean, sigma = model(_tensor(a[window], device), _tensor(b[window], device), own)
+        hidden = None
+        if memory_bodies is not None:
+            hidden = same_body(memory_bodies, torch.as_tensor(bodies[1][window], device=device))
+        mean, sigma = model(_tensor(a[window], device), _tensor(b[window], device), hidden)
         means.append(mean.cpu().numpy())
         sigmas.append(sigma.cpu().numpy())
     return np.concatenate(means), np.concatenate(sigmas)
 
 
-def calibrate(model: UnionOperator, a: np.ndarray, b: np.ndarray, union: np.ndarray) -> float:
-    """Scale σ so that μ ± z·σ holds 90 % of the validation eigenvalues."""
-    model.sigma_scale.fill_(1.0)
-    mean, sigma = predict(model, a, b)
-    factor = float(np.quantile(np.abs(mean - union) / sigma, 0.9) / INTERVAL_Z)
-    model.sigma_scale.fill_(factor)
-    return factor
+DECREASE_WEIGHTS = (0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)  # σ's decrease term, relative to the spread's
+CALIBRATION_BINS = 5
+
+
+def calibrate(
+    model: UnionOperator, a: np.ndarray, b: np.ndarray, union: np.ndarray, bodies: tuple[np.ndarray, np.ndarray]
+) -> tuple[float, float]:
+    """Fit σ's two weights so that μ ± z·σ holds 90 % of the validation eigenvalues, and as
+    evenly as it can across pairs that add little and pairs that add much.
+
+    For each relative weight of the decrease term the common factor is the one that covers 90 %
+    overall; the weight kept is the one whose worst coverage over quintiles of the predicted
+    decrease is nearest 90 %. Returns (spread weight, decrease weight).
+    """
+    parts = []
+    for spread, decrease in ((1.0, 0.0), (0.0, 1.0)):
+        model.sigma_scale.fill_(spread)
+        model.sigma_decrease.fill_(decrease)
+        mean, sigma = predict(model, a, b, bodies)
+        parts.append(sigma)
+    error = np.abs(mean - union)
+    added = parts[1].mean(1) / np.maximum(np.abs(mean).mean(1), 1e-12)
+    edges = np.quantile(added, np.linspace(0, 1, CALIBRATION_BINS + 1)[1:-1])
+    bins = np.searchsorted(edges, added)
+    best = (np.inf, 1.0, 0.0)
+    for weight in DECREASE_WEIGHTS if model.config.parametrization == MONOTONE else (0.0,):
+        sigma = np.maximum(parts[0] + weight * parts[1], 1e-12)
+        factor = float(np.quantile(error / sigma, 0.9) / INTERVAL_Z)
+        covered = error <= INTERVAL_Z * factor * sigma
+        worst = max(abs(covered[bins == i].mean() - 0.9) for i in np.unique(bins))
+        if worst < best[0]:
+            best = (worst, factor, factor * weight)
+    model.sigma_scale.fill_(best[1])
+    model.sigma_decrease.fill_(best[2])
+    return best[1], best[2]
 
 
 def build_operator(train: PairTable, config: UnionConfig) -> UnionOperator:
@@ -148,6 +194,8 @@ def train_union(
     if checkpoint.exists():
         progress, best = load_checkpoint(checkpoint, model, optimizer, schedule, generator)
     train_tensors = [_tensor(x, device) for x in (train.a, train.b, train.union)]
+    memory_bodies = torch.as_tensor(train.shape_a, device=device)
+    bodies = (train.shape_a, validation.shape_a)
     chain_rows = np.flatnonzero(~data.triples.test)
     chain_tensors = [_tensor(s[chain_rows], device) for s in data.triples.spectra]
     steps = max(1, len(train) // settings.batch)
@@ -165,13 +213,13 @@ def train_union(
             if len(chain_rows):
                 pick = torch.randint(len(chain_rows), (settings.chain_batch,), generator=generator).to(device)
                 chains = tuple(t[pick] for t in chain_tensors)
-            loss = _losses(model, batch, rows, chains)
+            loss = _losses(model, batch, same_body(memory_bodies, memory_bodies[rows]), chains)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
             optimizer.step()
             schedule.step(epoch + (step + 1) / steps)
-        mean, _ = predict(model, validation.a, validation.b)
+        mean, _ = predict(model, validation.a, validation.b, bodies)
         mae = float(np.abs(mean - validation.union).mean())
         if progress.finish_epoch(epoch, mae):
             best = snapshot(model)
@@ -180,6 +228,6 @@ def train_union(
         if progress.stale_epochs >= settings.patience:
             break
     model.load_state_dict(best)
-    calibrate(model, validation.a, validation.b, validation.union)
+    calibrate(model, validation.a, validation.b, validation.union, bodies)
     model.cpu().eval()
     return model
