@@ -1,0 +1,94 @@
+"""The laws of union measured on a served operator, on parts it has never seen.
+
+Parts are cut fresh from the template body shipped with the models (a neutral identity in the
+rest pose), by the data set's own region generators and spectrum code but from a seed no build
+uses, plus a depth camera's close-ups inside its far views. Needs no torch: it measures the ONNX
+graph through the service's own :class:`~app.inference.models.SpectralModels`, so the figures
+are the ones a client gets. The tests assert them (``tests/inference/test_union_laws.py``);
+``benchmarks/bench_union_laws.py`` prints them for any models folder, for before/after tables.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
+from app.inference.models import SpectralModels
+from training.data.camera import body_mesh, close_up_camera, orbit_camera, view_mask
+from training.data.regions import RegionSampler
+from training.data.spectra import region_mesh, remeshed
+
+SEED = 20_261_201  # no data set build draws from this stream
+NESTED_SHARE = 0.98  # a close-up this much inside its far view counts as inside it
+
+
+def relative_error(predicted: np.ndarray, truth: np.ndarray) -> float:
+    """Mean relative error over the eigenvalues that are not a closed body's λ₁ = 0."""
+    meaningful = truth > 1e-6
+    return float(np.mean(np.abs(predicted - truth)[meaningful] / truth[meaningful]))
+
+
+@dataclass(frozen=True)
+class LawParts:
+    """Spectra of fresh parts: (inner, outer) with inner ⊂ outer, each outer again re-meshed,
+    (close-up, far view) camera pairs, and the whole closed body."""
+
+    nested: list[tuple[np.ndarray, np.ndarray]]
+    remeshed_outer: list[np.ndarray]
+    views: list[tuple[np.ndarray, np.ndarray]]
+    body: np.ndarray
+
+
+def law_parts(sampler: RegionSampler, count: int = 12, seed: int = SEED) -> LawParts:
+    """``count`` nested region pairs and ``count // 2`` camera pairs on the sampler's template."""
+    template = sampler.template
+
+    def spectrum(mask: np.ndarray, remesh: bool = False) -> np.ndarray:
+        mesh = region_mesh(template.vertices, template.faces, mask)
+        return np.array(mesh_spectrum(remeshed(mesh) if remesh else mesh, SpectrumOptions(k=20)).eigenvalues)
+
+    rng = np.random.default_rng(seed)
+    nested, outers = [], []
+    while len(nested) < count:
+        outer = sampler.sample(rng).mask
+        centre = int(rng.choice(np.flatnonzero(outer)))
+        radius = rng.uniform(0.2, 0.5)
+        inner = sampler.clean(outer & (sampler.distances_from(centre, limit=radius) <= radius))
+        if inner is not None and sampler.area_fraction(inner) < sampler.area_fraction(outer) - 0.05:
+            nested.append((spectrum(inner), spectrum(outer)))
+            outers.append(spectrum(outer, remesh=True))
+    mesh = body_mesh(template.vertices, template.faces)
+    views = []
+    while len(views) < count // 2:
+        far = orbit_camera(mesh, rng.uniform(0, 2 * np.pi), rng.uniform(1.2, 2.5), rng.uniform(0.3, 1.0), 0.55)
+        a = view_mask(sampler, mesh, close_up_camera(mesh, far, rng.uniform(0.35, 0.6)))
+        b = view_mask(sampler, mesh, far)
+        if a is not None and b is not None and sampler.area_fraction(a & b) >= NESTED_SHARE * sampler.area_fraction(a):
+            views.append((spectrum(a), spectrum(b)))
+    return LawParts(nested, outers, views, spectrum(np.ones(len(template.vertices), bool)))
+
+
+def measure_laws(models: SpectralModels, parts: LawParts, seed: int = SEED) -> dict[str, list[float]]:
+    """Per-case relative errors of each law, and each case's largest excess over min(a, b)."""
+
+    def union(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return models.union([a, b]).eigenvalues
+
+    pairs = [*parts.nested, *parts.views]
+    singles = [s for pair in parts.nested for s in pair]
+    rng = np.random.default_rng(seed + 1)
+    arbitrary = [np.sort(rng.uniform(0.1, 500, len(parts.body))) for _ in range(20)]
+    pool = singles + arbitrary
+    excess = []
+    for _ in range(60):
+        i, j = rng.choice(len(pool), 2, replace=False)
+        a, b = pool[i], pool[j] * rng.uniform(0.2, 5)
+        excess.append(float(np.max(union(a, b) / np.maximum(np.minimum(a, b), 1e-12) - 1)))
+    return {
+        "idempotence": [relative_error(union(s, s), s) for s in singles],
+        "same_region": [relative_error(union(o, r), o) for (_, o), r in zip(parts.nested, parts.remeshed_outer)],
+        "absorption": [relative_error(union(a, b), b) for a, b in pairs],
+        "whole_body": [relative_error(union(a, parts.body)[1:], parts.body[1:]) for a, _ in parts.nested],
+        "whole_body_lambda1": [float(union(a, parts.body)[0] / parts.body[1]) for a, _ in parts.nested],
+        "excess_over_minimum": excess,
+    }
