@@ -62,6 +62,25 @@ def evaluate_command(
     _pipeline("evaluate", data, runs, models, preset, seed)
 
 
+@cli.command("score")
+def score_command(
+    data: DataOption = Path("data/standard"),
+    models: Annotated[Path, typer.Option(help="A folder of exported ONNX models (read only).")] = Path("models"),
+    out: Annotated[Path, typer.Option(help="Where the metrics go (JSON).")] = Path("scores.json"),
+    seed: Annotated[int, typer.Option()] = 0,
+) -> None:
+    """Score exported ONNX models on a data set without their checkpoints: the union tables of
+    ``evaluate`` (localization by the served localizer only), e.g. an earlier model on new rows."""
+    import json
+
+    from training.learning.data import SpectralData
+    from training.learning.evaluate import evaluate, served_predictors
+
+    metrics = evaluate(SpectralData(data, seed=seed), *served_predictors(models))
+    out.write_text(json.dumps(metrics, indent=1))
+    typer.echo(f"scored {models} on {data}: {len(metrics['rows'])} rows, {len(metrics['strata'])} strata → {out}")
+
+
 def _pipeline(verb: str, data: Path, runs: Path, models: Path, preset: str, seed: int) -> None:
     from training.learning.pipeline import TRAINING_PRESETS, UnfinishedRuns, run_pipeline
 

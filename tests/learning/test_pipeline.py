@@ -36,7 +36,7 @@ def test_onnx_matches_pytorch(trained):
     assert metrics["parity_max_relative"]["localizer"] <= 1e-4
 
 
-def test_exported_union_commutes_and_is_non_decreasing(trained):
+def test_exported_union_commutes_is_non_decreasing_and_below_both_parts(trained):
     root, _ = trained
     union = session(root / "models" / "union.onnx")
     data = np.load(root / "data" / "dataset.npz")
@@ -46,6 +46,8 @@ def test_exported_union_commutes_and_is_non_decreasing(trained):
     ba, _ = union.run(None, {"spectrum_a": b, "spectrum_b": a})
     assert np.max(np.abs(ab - ba)) <= 1e-6
     assert (np.diff(ab, axis=1) >= 0).all() and (sigma > 0).all()
+    # A closed body's λ₁ is a numerical zero, sometimes −1e-13: the union's is clipped to 0.
+    assert (ab <= np.maximum(np.minimum(a, b), 0) * (1 + 1e-6)).all()
     scaled, _ = union.run(None, {"spectrum_a": 4 * a, "spectrum_b": 4 * b})
     np.testing.assert_allclose(scaled, 4 * ab, rtol=1e-5)
 
@@ -75,6 +77,27 @@ def test_tables_cover_the_test_rows(trained):
     assert {"operator", "elementwise_min", "larger_part", "lookup"} <= set(row["union"])
     card = (root / "models" / "MODEL_CARD.md").read_text()
     assert "| test_a/known_man/mesh |" in card and "| λ20 |" in card
+    assert any(key.startswith("test_c/") for key in written["strata"]) and "| camera_same |" in card
+    assert {"3", "4", "5", "associativity"} <= set(written["test_c_chains"])
+
+
+def test_scoring_the_exported_models_gives_the_trained_figures(trained, tmp_path):
+    """`score` reads only the ONNX graphs: on the same data it must find what training found."""
+    from typer.testing import CliRunner
+
+    from training.cli import cli
+
+    root, metrics = trained
+    out = tmp_path / "scores.json"
+    arguments = ["score", "--data", str(root / "data"), "--models", str(root / "models"), "--out", str(out)]
+    result = CliRunner().invoke(cli, arguments)
+    assert result.exit_code == 0, result.output
+    scores = json.loads(out.read_text())
+    for table in ("rows", "strata"):
+        assert scores[table].keys() == metrics[table].keys()
+        for key, row in metrics[table].items():
+            expected = row["union"]["operator"]["mae"]
+            assert abs(scores[table][key]["union"]["operator"]["mae"] - expected) <= 1e-3 * max(expected, 1), key
 
 
 def test_a_killed_run_resumes_where_it_stopped(trained, tmp_path):

@@ -6,7 +6,9 @@ errors next to the baselines' (same rows, same run), the calibration of the oper
 parts and the pose noise floor (one region of one identity across poses) complete the picture.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -94,13 +96,49 @@ def spectral_errors(predicted: np.ndarray, truth: np.ndarray) -> dict:
     }
 
 
+UnionPredictor = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # (a, b) → (union, σ)
+RegionPredictor = Callable[[np.ndarray], np.ndarray]  # spectra → (m, n) boolean template masks
+
+
+def trained_predictors(
+    union: UnionOperator, localizers: dict[str, Localizer]
+) -> tuple[UnionPredictor, dict[str, RegionPredictor]]:
+    """The PyTorch models as the evaluator's predictors."""
+    regions = {name: (lambda spectra, model=model: localize(model, spectra)) for name, model in localizers.items()}
+    return (lambda a, b: predict(union, a, b)), regions
+
+
+def served_predictors(models: Path, batch: int = 1024) -> tuple[UnionPredictor, dict[str, RegionPredictor]]:
+    """The exported ONNX graphs of a models folder as the evaluator's predictors: how a committed
+    model (this one or an earlier one) scores on a data set it was not evaluated on."""
+    from training.learning.export import session
+
+    union_graph, localizer_graph = session(models / "union.onnx"), session(models / "localizer.onnx")
+
+    def union(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        outputs = [
+            union_graph.run(
+                None,
+                {"spectrum_a": a[i : i + batch].astype(np.float32), "spectrum_b": b[i : i + batch].astype(np.float32)},
+            )
+            for i in range(0, len(a), batch)
+        ]
+        return tuple(np.concatenate([o[j] for o in outputs]) for j in range(2))  # type: ignore[return-value]
+
+    def region(spectra: np.ndarray) -> np.ndarray:
+        (probability,) = localizer_graph.run(None, {"spectrum": spectra.astype(np.float32)})
+        return probability >= 0.5
+
+    return union, {"all": region}
+
+
 @dataclass
 class Evaluator:
-    """Everything the rows share: data, models, the lookup of the training pairs, areas."""
+    """Everything the rows share: data, predictors, the lookup of the training pairs, areas."""
 
     data: SpectralData
-    union: UnionOperator
-    localizers: dict[str, Localizer]
+    union: UnionPredictor
+    localizers: dict[str, RegionPredictor]
 
     def __post_init__(self) -> None:
         pairs = self.data.pairs
@@ -109,7 +147,7 @@ class Evaluator:
         self.areas = self.data.vertex_area
 
     def row(self, rows: PairTable, localization: bool = True) -> dict:
-        mean, sigma = predict(self.union, rows.a, rows.b)
+        mean, sigma = self.union(rows.a, rows.b)
         methods = {
             "operator": mean,
             "elementwise_min": elementwise_min(rows.a, rows.b),
@@ -125,8 +163,8 @@ class Evaluator:
             return out
         truth = self.data.masks(rows.mask_union)
         out["localization"] = {}
-        for name, model in self.localizers.items():
-            iou, accuracy = symmetric_scores(localize(model, mean), truth, self.areas, self.data.template.mirror)
+        for name, region in self.localizers.items():
+            iou, accuracy = symmetric_scores(region(mean), truth, self.areas, self.data.template.mirror)
             out["localization"][name] = {"iou": float(iou.mean()), "accuracy": float(accuracy.mean())}
         return out
 
@@ -176,7 +214,7 @@ class Evaluator:
         sigma = np.zeros_like(views[:, 0])
         for length in range(2, views.shape[1] + 1):
             step = views[:, length - 1]
-            current["operator"], sigma = predict(self.union, current["operator"], step)
+            current["operator"], sigma = self.union(current["operator"], step)
             current["lookup"] = self.lookup.predict(current["lookup"], step)
             if length < 3:
                 continue
@@ -187,8 +225,8 @@ class Evaluator:
                 "union": {name: spectral_errors(p, truth) for name, p in methods.items()},
                 "interval_coverage": float(np.mean(np.abs(current["operator"] - truth) <= INTERVAL_Z * sigma)),
             }
-        left = predict(self.union, predict(self.union, views[:, 0], views[:, 1])[0], views[:, 2])[0]
-        right = predict(self.union, views[:, 0], predict(self.union, views[:, 1], views[:, 2])[0])[0]
+        left = self.union(self.union(views[:, 0], views[:, 1])[0], views[:, 2])[0]
+        right = self.union(views[:, 0], self.union(views[:, 1], views[:, 2])[0])[0]
         gap = np.abs(left - right) / np.maximum(np.abs(right), 1e-6)
         out["associativity"] = {"rows": len(gap), "mean_relative_gap": float(gap[:, 1:].mean())}
         return out
@@ -199,9 +237,9 @@ class Evaluator:
         a, b, c, _, abc = (s[triples.test] for s in triples.spectra)
         if not len(a):
             return {"rows": 0}
-        inner = predict(self.union, a, b)[0]
+        inner = self.union(a, b)[0]
         chained = {
-            "operator": predict(self.union, inner, c)[0],
+            "operator": self.union(inner, c)[0],
             "elementwise_min": np.minimum(np.minimum(a, b), c),
             "lookup": self.lookup.predict(self.lookup.predict(a, b), c),
         }
@@ -228,8 +266,8 @@ class Evaluator:
         return {"rows": int(finite.sum()), **spectral_errors(moved_array[finite], truth_array[finite])}
 
 
-def evaluate(data: SpectralData, union: UnionOperator, localizers: dict[str, Localizer]) -> dict:
-    """metrics.json's content: every test row, chains, point clouds and the noise floor."""
+def evaluate(data: SpectralData, union: UnionPredictor, localizers: dict[str, RegionPredictor]) -> dict:
+    """metrics.json's content: every test row, overlap strata, chains, point clouds and the noise floor."""
     evaluator = Evaluator(data, union, localizers)
     pairs = data.pairs
     random_pairs = np.isin(pairs.scenario, [FULL_COVERAGE, PARTIAL_UNION])  # the paper's kinds of pair

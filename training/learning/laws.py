@@ -86,7 +86,9 @@ def measure_laws(models: SpectralModels, parts: LawParts, seed: int = SEED) -> d
         excess.append(float(np.max(union(a, b) / np.maximum(np.minimum(a, b), 1e-12) - 1)))
     return {
         "idempotence": [relative_error(union(s, s), s) for s in singles],
-        "same_region": [relative_error(union(o, r), o) for (_, o), r in zip(parts.nested, parts.remeshed_outer)],
+        "same_region": [
+            relative_error(union(o, r), o) for (_, o), r in zip(parts.nested, parts.remeshed_outer, strict=True)
+        ],
         "absorption": [relative_error(union(a, b), b) for a, b in pairs],
         "whole_body": [relative_error(union(a, parts.body)[1:], parts.body[1:]) for a, _ in parts.nested],
         "whole_body_lambda1": [float(union(a, parts.body)[0] / parts.body[1]) for a, _ in parts.nested],

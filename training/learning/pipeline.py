@@ -19,7 +19,7 @@ from app.retrieval.seed import SEED_FILE
 from training.learning.baselines import elementwise_min, larger_part
 from training.learning.card import update_card
 from training.learning.data import SpectralData
-from training.learning.evaluate import evaluate
+from training.learning.evaluate import evaluate, trained_predictors
 from training.learning.export import export_localizer, export_union, localizer_parity, union_parity
 from training.learning.fit import is_finished, validation_history
 from training.learning.localizer_net import Localizer, LocalizerConfig
@@ -127,7 +127,7 @@ def run_pipeline(
         "union": union_parity(union, models / UNION_FILE, real.a, real.b),
         "localizer": localizer_parity(localizers["all"], models / LOCALIZER_FILE, real.union),
     }
-    metrics = evaluate(data, union, localizers)
+    metrics = evaluate(data, *trained_predictors(union, localizers))
     labels, complete, identity = complete_shapes(data)
     save_seed(models / SEED_FILE, labels, complete)
     metrics["retrieval"] = retrieval_table(data, retrieval_queries(data, union), complete, identity)
