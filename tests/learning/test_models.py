@@ -48,7 +48,7 @@ def test_memory_finds_a_stored_pair_in_either_order_and_at_any_scale():
     memory = UnionMemory(a, b, union)
     for factor in (1.0, 0.05, 40.0):
         for first, second in ((a, b), (b, a)):
-            prior, distance = memory(first * factor, second * factor, 1)
+            prior, distance, _ = memory(first * factor, second * factor, 1)
             scale = common_scale(first * factor, second * factor)
             torch.testing.assert_close(prior[:, 0] * scale, union * factor, rtol=1e-5, atol=0)
             assert (distance < 1e-2).all()
@@ -59,12 +59,14 @@ def test_memory_returns_the_nearest_other_pairs_in_order():
     a, b, union = spectra(30, 13), spectra(30, 14), spectra(30, 15)
     memory = UnionMemory(a, b, union)
     za, zb = relative_logs(a, b)
-    priors, distances = memory(a, b, 3, torch.eye(30, dtype=torch.bool))
+    priors, distances, floors = memory(a, b, 3, torch.eye(30, dtype=torch.bool))
     forward = torch.cdist(torch.cat([za, zb], 1), memory.keys)
     backward = torch.cdist(torch.cat([zb, za], 1), memory.keys)
     expected, nearest = torch.minimum(forward, backward).fill_diagonal_(torch.inf).topk(3, largest=False)
     torch.testing.assert_close(priors, memory.unions[nearest])
     torch.testing.assert_close(distances, expected, rtol=1e-4, atol=1e-3)
+    keys = memory.keys[nearest]
+    torch.testing.assert_close(floors, torch.minimum(keys[..., :20], keys[..., 20:]))
 
 
 @pytest.mark.parametrize("correction", CORRECTIONS)

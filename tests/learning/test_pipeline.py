@@ -78,6 +78,7 @@ def test_tables_cover_the_test_rows(trained):
     card = (root / "models" / "MODEL_CARD.md").read_text()
     assert "| test_a/known_man/mesh |" in card and "| λ20 |" in card
     assert any(key.startswith("test_c/") for key in written["strata"]) and "| camera_same |" in card
+    assert "| U(A, A) within 0.5 % of A (Test C identical) |" in card
     assert {"3", "4", "5", "associativity"} <= set(written["test_c_chains"])
 
 

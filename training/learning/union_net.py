@@ -6,14 +6,20 @@ better union than the paper's transformer learned to predict on our data (valida
 relative error 7.8 % against 14.2 % at the same budget, and the transformer underfits: train
 13.2 %). So the operator carries its training pairs inside the model (:class:`UnionMemory`,
 exported as constants of the ONNX graph, so the service needs nothing else) and learns only
-the correction of those priors. The correction is the paper's pair of transformers
+the correction of those priors. The priors are of two kinds, per retrieved pair: its union,
+rescaled; and what its parts added to each other (its union below its parts' elementwise
+minimum, in z), taken off this pair's minimum — the one that carries "nothing added" over from
+a nested or identical neighbour. The correction is the paper's pair of transformers
 (:class:`TransformerCorrection`: T_A reads both operands in both orders, summed, so the
-operator commutes exactly; T_B decodes), reading the unions of the few nearest pairs and how
-far those pairs are, and returning the change of every log-eigenvalue of the nearest union;
-:class:`DeepSetsCorrection` is the cheaper comparison (validation mae 5.39 against 5.05, Test B
-mean relative error 12.4–13.3 % against 11.0–11.4 %). σ is the spread of the retrieved unions
-around the prediction, calibrated on validation data. It is trained leave-one-out, each
-training pair seeing the priors of its nearest *other* pairs, as a new pair would.
+operator commutes exactly; T_B decodes), reading both kinds of prior of the few nearest pairs
+and how far those pairs are, and returning the change of every log-eigenvalue of the nearest
+union; :class:`DeepSetsCorrection` is the cheaper comparison. The union is then, by default
+(:data:`MONOTONE`), a non-negative decrease from the operands' elementwise minimum, so that
+λ(A ∪ B) ≤ min(λ(A), λ(B)) holds for every output, as it does for every true union; :data:`PRIOR`
+is the unbounded corrected prior, kept for the comparison. σ is the spread of the neighbours'
+answers around the prediction plus a term in the predicted decrease, calibrated on validation
+data. It is trained leave-one-body-out, each training pair seeing the priors of pairs cut from
+other bodies, as a new pair would.
 
 Everything is in one common scale s, the mean of all 2k input eigenvalues, so the network sees
 the two parts' sizes relative to each other (never each part normalised on its own):
@@ -88,9 +94,10 @@ class UnionMemory(nn.Module):
         scale = common_scale(a, b)
         return torch.cat([relative_log(a, scale), relative_log(b, scale)], dim=1)
 
-    def forward(self, a: Tensor, b: Tensor, count: int, exclude: Tensor | None = None) -> tuple[Tensor, Tensor]:
-        """The ``count`` nearest pairs' unions (B, count, k), in the queries' common scale,
-        nearest first, and their key distances (B, count), for operands in 1/m²."""
+    def forward(self, a: Tensor, b: Tensor, count: int, exclude: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
+        """The ``count`` nearest pairs' unions (B, count, k) in their own common scale, nearest
+        first, their key distances (B, count), and their operands' elementwise minimum in z
+        (B, count, k), for operands in 1/m²."""
         k = a.shape[1]
         forward = self.queries(a, b)
         backward = torch.cat([forward[:, k:], forward[:, :k]], dim=1)
@@ -102,7 +109,8 @@ class UnionMemory(nn.Module):
         # The query's own norm, summed per operand so that both orders give the same bits.
         query_norm = (forward[:, :k] ** 2).sum(1, keepdim=True) + (forward[:, k:] ** 2).sum(1, keepdim=True)
         distances = torch.sqrt(torch.clamp(nearest + query_norm, min=1e-8))  # finite gradient at 0
-        return self.unions[rows], distances.float()
+        keys = self.keys[rows]
+        return self.unions[rows], distances.float(), torch.minimum(keys[..., :k], keys[..., k:])
 
 
 def _mlp(inputs: int, width: int, outputs: int, dropout: float) -> nn.Sequential:
@@ -120,9 +128,9 @@ class DeepSetsCorrection(nn.Module):
 
     def __init__(self, config: UnionConfig) -> None:
         super().__init__()
-        k, n, width = config.k, config.neighbours, config.width
+        k, n, width = config.k, 2 * config.neighbours, config.width  # n: both kinds of prior
         self.part = _mlp(k + n * k, width, width, config.dropout)  # φ(z(part), z(priors))
-        self.head = _mlp(width + n * k + n, width, k, config.dropout)  # ρ(Σφ, z(priors), distances)
+        self.head = _mlp(width + n * k + config.neighbours, width, k, config.dropout)  # ρ(Σφ, priors, distances)
         nn.init.zeros_(self.head[-1].weight)  # start at the nearest prior
         nn.init.zeros_(self.head[-1].bias)
 
@@ -147,7 +155,7 @@ class TransformerCorrection(nn.Module):
         super().__init__()
         k, n, d = config.k, config.neighbours, config.embedding
         self.k = k
-        self.embed = nn.Linear(2 + n, d)
+        self.embed = nn.Linear(2 + 2 * n, d)  # offset, z, and both kinds of prior
         self.position = nn.Parameter(torch.randn(k, d) * 0.02)
         self.operand = nn.Parameter(torch.randn(2, d) * 0.02)  # self, other
         self.distance = nn.Linear(n, d)
@@ -199,15 +207,18 @@ class UnionOperator(nn.Module):
     ) -> tuple[torch.Tensor, torch.Tensor]:
         scale = common_scale(a, b)
         za, zb = relative_log(a, scale), relative_log(b, scale)
-        unions, distances = self.memory(a, b, self.config.neighbours, exclude)
+        unions, distances, floors = self.memory(a, b, self.config.neighbours, exclude)
         priors = relative_log(unions, 1.0)  # (B, neighbours, k)
-        change = self.correction(za, zb, priors, distances)
+        floor = torch.minimum(za, zb)
+        # What each neighbour's parts added to each other, taken off this pair's minimum.
+        transferred = floor[:, None] - (floors - priors)
+        change = self.correction(za, zb, torch.cat([priors, transferred], dim=1), distances)
         if self.config.parametrization == MONOTONE:
-            z, decrease = self.decreased(torch.minimum(za, zb), priors[:, 0] + change)
+            z, decrease = self.decreased(floor, priors[:, 0] + change)
         else:
             z, decrease = priors[:, 0] + change, torch.zeros_like(change)
         union = torch.sort(torch.relu(torch.exp(z) - EPSILON), dim=-1).values
-        return union * scale, self.sigma(union, priors, decrease) * scale
+        return union * scale, self.sigma(union, transferred, decrease) * scale
 
     @staticmethod
     def decreased(floor: Tensor, proposal: Tensor) -> tuple[Tensor, Tensor]:
@@ -223,18 +234,22 @@ class UnionOperator(nn.Module):
         decrease = nn.functional.softplus(SHARPNESS * (floor - proposal)) / SHARPNESS
         return floor - decrease, decrease
 
-    def sigma(self, union: torch.Tensor, priors: torch.Tensor, decrease: torch.Tensor) -> torch.Tensor:
-        """σ relative to the common scale, from how far the neighbours' unions lie from the
+    def sigma(self, union: torch.Tensor, transferred: torch.Tensor, decrease: torch.Tensor) -> torch.Tensor:
+        """σ relative to the common scale, from how far the neighbours' answers lie from the
         prediction and how far the prediction lies below the operands' minimum.
 
-        The root-mean-square distance in z of the retrieved unions is a spread of plausible
-        answers; the decrease is how much the operator claims the parts add to each other, which
-        is zero, and certain, for a part united with itself or with a part containing it. Their
+        A neighbour's answer here is what its parts added to each other, taken off this pair's
+        minimum: neighbours that agree on that are sure, whatever their own size (a part with
+        itself finds other parts with themselves, which added nothing, so σ shrinks to the
+        floor; their unions themselves, other bodies' parts, spread widely). The root-mean-square
+        distance in z of those answers is a spread of plausible answers; the decrease is how much
+        the operator claims the parts add to each other, zero and certain for a part united with
+        itself or with a part containing it. Their
         weights are fitted on validation data to a calibrated interval (``sigma_scale`` for the
         spread, ``sigma_decrease`` for the decrease). A learned σ head, trained by Gaussian
         likelihood next to the mean, cost the mean a tenth of its accuracy (validation mae
         5.1 → 5.5) and diverged on chains.
         """
-        spread = (priors - relative_log(union, 1.0)[:, None]).pow(2).mean(1).sqrt()
+        spread = (transferred - relative_log(union, 1.0)[:, None]).pow(2).mean(1).sqrt()
         relative = (spread + SIGMA_FLOOR) * self.sigma_scale + decrease * self.sigma_decrease
         return relative * (union + EPSILON)
