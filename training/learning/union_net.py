@@ -86,6 +86,11 @@ class UnionMemory(nn.Module):
         self.register_buffer("keys", keys)
         self.register_buffer("key_norms", (keys.double() ** 2).sum(1))
         self.register_buffer("unions", (union_t / common_scale(a_t, b_t)).float())
+        # Exact ties (pairs stored twice with the same spectra, e.g. a part with itself and its
+        # re-scan in the rest pose) go to the earlier row in both runtimes: torch and onnxruntime
+        # break top-k ties differently. Far below any real gap (≤ 3e-8 in squared distance);
+        # not part of the state, so it needs no retraining.
+        self.register_buffer("tie_break", torch.arange(len(keys), dtype=torch.float64) * 1e-12, persistent=False)
 
     @staticmethod
     def queries(a: Tensor, b: Tensor) -> Tensor:
@@ -103,6 +108,7 @@ class UnionMemory(nn.Module):
         backward = torch.cat([forward[:, k:], forward[:, :k]], dim=1)
         keys = self.keys.double().T
         distance = torch.minimum(self.key_norms - 2 * forward @ keys, self.key_norms - 2 * backward @ keys)
+        distance = distance + self.tie_break
         if exclude is not None:
             distance = distance.masked_fill(exclude, torch.inf)
         nearest, rows = torch.topk(distance, count, dim=1, largest=False)
