@@ -17,6 +17,7 @@ retired after ``tasks_per_worker`` solves (0: never): a worker's resident memory
 """
 
 import asyncio
+import gc
 import multiprocessing
 import os
 import resource
@@ -65,6 +66,24 @@ def _map_blas_buffers() -> None:
     blas.dgemm(1.0, square, square)
 
 
+def _solve_task(data: bytes, file_type: str, options: SpectrumOptions) -> SpectrumReport:
+    """The worker's task: a solve, with a memory failure answered without its traceback.
+
+    A ``MemoryError``'s traceback holds the frames of the failed solve, and with them every
+    array it had built. pebble keeps a task's result (the exception) until the worker's next
+    task has finished, so those arrays stayed mapped under the cap while the next upload was
+    solved: a small patch after a failed large grid found ~8 MB of a 120 MB cap free and failed
+    too, or not, by how far the large solve had got. The new error is raised once the handler
+    has let the old one go, so the worker is back at its idle size when it answers.
+    """
+    try:
+        return spectrum_from_bytes(data, file_type, options)
+    except MemoryError:
+        pass
+    gc.collect()
+    raise SolveMemoryExceeded("the solve needed more memory than a solver worker may use")
+
+
 class SolverPool:
     """``concurrency`` worker processes behind a bounded admission count."""
 
@@ -102,13 +121,11 @@ class SolverPool:
         with self._admission():
             async with self.limiter:
                 task = (data, file_type, options)
-                future = self._pool.schedule(spectrum_from_bytes, args=task, timeout=self.timeout_s)
+                future = self._pool.schedule(_solve_task, args=task, timeout=self.timeout_s)
                 try:
                     return await asyncio.wrap_future(future)
                 except TimeoutError as exc:
                     raise SolveTimeout(f"the solve did not finish within {self.timeout_s:g} s") from exc
-                except MemoryError as exc:
-                    raise SolveMemoryExceeded("the solve needed more memory than a solver worker may use") from exc
                 except ProcessExpired as exc:
                     raise ProblemError(
                         503,

@@ -48,6 +48,13 @@ def test_a_solve_past_its_deadline_is_stopped_and_answered_422(tmp_path):
         assert set(client.app.state.solver.worker_pids()).isdisjoint(before)
 
 
+def _address_space_mb(pid: int) -> float:
+    """A process's mapped address space (VmSize), what ``RLIMIT_AS`` caps."""
+    status = Path(f"/proc/{pid}/status").read_text()
+    line = next(line for line in status.splitlines() if line.startswith("VmSize:"))
+    return int(line.split()[1]) / 1024
+
+
 def _idle_worker_address_space_mb() -> float:
     """What a solver worker maps before it solves anything (numpy, scipy, BLAS buffers)."""
 
@@ -55,22 +62,25 @@ def _idle_worker_address_space_mb() -> float:
         pool = SolverPool(1, 0, 60, 0)
         await pool.start()
         try:
-            status = Path(f"/proc/{pool.worker_pids()[0]}/status").read_text()
+            return _address_space_mb(pool.worker_pids()[0])
         finally:
             pool.close()
-        line = next(line for line in status.splitlines() if line.startswith("VmSize:"))
-        return int(line.split()[1]) / 1024
 
     return anyio.run(measure)
 
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads the worker's VmSize from /proc")
 def test_a_solve_over_the_memory_cap_is_answered_422_and_small_ones_still_fit(tmp_path):
-    cap = int(_idle_worker_address_space_mb()) + 120  # the small patch needs a few MB, the large grid ~300
+    idle = _idle_worker_address_space_mb()
+    cap = int(idle) + 120  # the small patch needs a few MB, the large grid ~300
     with client_for(tmp_path, solve_memory_mb=cap) as client:
         response = post(client, LARGE)
         assert response.status_code == 422, response.text
         assert response.json()["type"] == "/problems/solve-memory-exceeded"
+        # The failed solve's arrays are gone: it had mapped ~110 MB, and kept them (its traceback
+        # held its frames) while the next upload was solved, which then failed or not by chance.
+        (worker,) = client.app.state.solver.worker_pids()
+        assert _address_space_mb(worker) < idle + 40
         assert post(client, SMALL).status_code == 200
 
 
