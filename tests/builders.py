@@ -42,14 +42,25 @@ def ascii_ply(vertices: np.ndarray, faces: np.ndarray | None = None, boundary=No
 
 def glb_with_external_buffer(uri: str, mesh: Mesh) -> bytes:
     """A GLB whose geometry lives in an external buffer file named by ``uri``."""
-    positions = mesh.vertices.astype(np.float32).tobytes()
-    indices = mesh.faces.astype(np.uint32).tobytes()
-    gltf = {
+    gltf = _gltf(mesh, nodes=1)
+    gltf["buffers"][0]["uri"] = uri
+    return _glb(gltf)
+
+
+def instanced_glb(mesh: Mesh, nodes: int) -> bytes:
+    """A GLB whose ``nodes`` scene nodes each place the one mesh it holds: small on the wire,
+    ``nodes`` times the mesh once flattened."""
+    return _glb(_gltf(mesh, nodes), external_buffer(mesh))
+
+
+def _gltf(mesh: Mesh, nodes: int) -> dict:
+    positions = len(mesh.vertices) * 12
+    return {
         "asset": {"version": "2.0"},
-        "buffers": [{"uri": uri, "byteLength": len(positions) + len(indices)}],
+        "buffers": [{"byteLength": positions + mesh.faces.size * 4}],
         "bufferViews": [
-            {"buffer": 0, "byteOffset": 0, "byteLength": len(positions)},
-            {"buffer": 0, "byteOffset": len(positions), "byteLength": len(indices)},
+            {"buffer": 0, "byteOffset": 0, "byteLength": positions},
+            {"buffer": 0, "byteOffset": positions, "byteLength": mesh.faces.size * 4},
         ],
         "accessors": [
             {
@@ -63,13 +74,20 @@ def glb_with_external_buffer(uri: str, mesh: Mesh) -> bytes:
             {"bufferView": 1, "componentType": 5125, "count": mesh.faces.size, "type": "SCALAR"},
         ],
         "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
-        "nodes": [{"mesh": 0}],
-        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0, "translation": [3.0 * i, 0, 0]} for i in range(nodes)],
+        "scenes": [{"nodes": list(range(nodes))}],
         "scene": 0,
     }
-    chunk = json.dumps(gltf).encode()
+
+
+def _glb(gltf: dict, binary: bytes = b"") -> bytes:
+    """Pack a glTF document (and its binary buffer, if embedded) as GLB chunks."""
+    chunk = json.dumps(gltf, separators=(",", ":")).encode()
     chunk += b" " * (-len(chunk) % 4)
     body = struct.pack("<II", len(chunk), 0x4E4F534A) + chunk
+    if binary:
+        binary += b"\0" * (-len(binary) % 4)
+        body += struct.pack("<II", len(binary), 0x004E4942) + binary
     return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
 
 

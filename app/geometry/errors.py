@@ -37,6 +37,20 @@ class TooManyVertices(GeometryError):
     title = "Too many vertices"
 
 
+class TooManyFaces(GeometryError):
+    """The shape declares or holds more faces than the cap that goes with the vertex cap."""
+
+    slug = "too-many-faces"
+    title = "Too many faces"
+
+
+class SceneTooLarge(GeometryError):
+    """A scene file holds more nodes (instances of its meshes) than a scan ever needs."""
+
+    slug = "scene-too-large"
+    title = "Scene too large"
+
+
 class MissingBoundary(GeometryError):
     """A point cloud was neither declared closed nor given its boundary points."""
 

@@ -36,6 +36,7 @@ class SpectrumReport:
     vertices: int
     free_vertices: int
     area_m2: float
+    faces_dropped: int
     components_dropped: int
     holes_filled: int
     scale_to_metres: float
@@ -64,6 +65,7 @@ def mesh_spectrum(mesh: Mesh, options: SpectrumOptions, scale: float = 1.0) -> S
         options.k,
         started,
         kind="mesh",
+        faces_dropped=prepared.faces_dropped,
         components_dropped=prepared.components_dropped,
         holes_filled=prepared.holes_filled,
         scale=scale,
@@ -81,6 +83,7 @@ def cloud_spectrum(cloud: PointCloud, options: SpectrumOptions, scale: float = 1
         options.k,
         started,
         kind="points",
+        faces_dropped=0,
         components_dropped=0,
         holes_filled=0,
         scale=scale,
@@ -94,6 +97,7 @@ def _solve(
     started: float,
     *,
     kind: Literal["mesh", "points"],
+    faces_dropped: int,
     components_dropped: int,
     holes_filled: int,
     scale: float,
@@ -109,6 +113,7 @@ def _solve(
         vertices=n,
         free_vertices=n if fixed is None else int(np.count_nonzero(~fixed)),
         area_m2=float(operators.mass.diagonal().sum()),
+        faces_dropped=faces_dropped,
         components_dropped=components_dropped,
         holes_filled=holes_filled,
         scale_to_metres=scale,
