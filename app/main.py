@@ -7,6 +7,7 @@ import anyio
 from fastapi import FastAPI
 
 from app import __version__
+from app.api.admission import AdmissionMiddleware
 from app.api.metrics import MetricsMiddleware
 from app.api.metrics import router as metrics_router
 from app.api.operands import MAX_OPERANDS
@@ -34,7 +35,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         solver = SolverPool(
             settings.solver_concurrency,
-            settings.max_queued_solves,
             settings.solve_timeout_seconds,
             settings.solve_memory_mb,
             settings.solves_per_worker,
@@ -60,7 +60,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         form_limits={"max_files": MAX_OPERANDS, "max_fields": MAX_FORM_FIELDS, "max_part_size": MAX_FORM_FIELD_BYTES},
     )
     app.state.settings = settings
-    app.add_middleware(UploadLimitMiddleware, max_bytes=settings.max_upload_bytes)
+    app.add_middleware(
+        AdmissionMiddleware,
+        capacity=settings.solver_concurrency + settings.max_queued_solves,
+        byte_budget=settings.max_inflight_upload_bytes,
+        max_body_bytes=settings.max_upload_bytes,
+    )
+    app.add_middleware(
+        UploadLimitMiddleware, max_bytes=settings.max_upload_bytes, body_timeout_s=settings.body_timeout_seconds
+    )
     app.add_middleware(MetricsMiddleware)
     install_problem_handlers(app)
     app.include_router(health.router)

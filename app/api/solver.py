@@ -8,8 +8,8 @@ upload whose factorization would not fit fails with 422 ``solve-memory-exceeded`
 of taking the host's memory. A worker that dies for any other reason (killed, crashed) is
 replaced too; its request is answered 503 ``solver-crashed`` with ``Retry-After``.
 
-Admission is bounded in front of the pool: ``concurrency`` solves run, ``queue`` more may
-wait, and the rest are refused at once with 503 ``overloaded`` — never an unbounded backlog.
+``concurrency`` solves run at once and the rest wait for a slot; how many may wait is bounded
+in front of the pool, per request, when its headers arrive (``app.api.admission``).
 Workers start from a fork server that has already imported the geometry code, so replacing
 one costs milliseconds, not the seconds of a fresh interpreter; that is also why each worker is
 retired after ``tasks_per_worker`` solves (0: never): a worker's resident memory creeps up by
@@ -21,8 +21,6 @@ import gc
 import multiprocessing
 import os
 import resource
-from collections.abc import Iterator
-from contextlib import contextmanager
 
 import anyio
 import numpy as np
@@ -34,7 +32,7 @@ from app.api.problems import ProblemError
 from app.geometry.errors import SolveMemoryExceeded, SolveTimeout
 from app.geometry.pipeline import SpectrumOptions, SpectrumReport, spectrum_from_bytes
 
-RETRY_AFTER_SECONDS = 1  # a solve takes ~0.1–0.3 s: a queue slot frees within a second
+RETRY_AFTER_SECONDS = 1  # a solve takes ~0.1–0.3 s: a place frees within a second
 _PRELOADED = ["app.geometry.pipeline"]
 _CONTEXT = multiprocessing.get_context("forkserver")
 
@@ -85,14 +83,10 @@ def _solve_task(data: bytes, file_type: str, options: SpectrumOptions) -> Spectr
 
 
 class SolverPool:
-    """``concurrency`` worker processes behind a bounded admission count."""
+    """``concurrency`` worker processes, one solve each at a time."""
 
-    def __init__(
-        self, concurrency: int, queue: int, timeout_s: float, memory_mb: int, tasks_per_worker: int = 0
-    ) -> None:
+    def __init__(self, concurrency: int, timeout_s: float, memory_mb: int, tasks_per_worker: int = 0) -> None:
         self.limiter = anyio.CapacityLimiter(concurrency)
-        self.capacity = concurrency + queue
-        self.admitted = 0
         self.timeout_s = timeout_s
         _CONTEXT.set_forkserver_preload(_PRELOADED)
         self._pool = ProcessPool(
@@ -118,37 +112,18 @@ class SolverPool:
 
     async def solve(self, data: bytes, file_type: str, options: SpectrumOptions) -> SpectrumReport:
         """The spectrum of one upload, or the error that says why not; see the module docstring."""
-        with self._admission():
-            async with self.limiter:
-                task = (data, file_type, options)
-                future = self._pool.schedule(_solve_task, args=task, timeout=self.timeout_s)
-                try:
-                    return await asyncio.wrap_future(future)
-                except TimeoutError as exc:
-                    raise SolveTimeout(f"the solve did not finish within {self.timeout_s:g} s") from exc
-                except ProcessExpired as exc:
-                    raise ProblemError(
-                        503,
-                        "solver-crashed",
-                        "Solver crashed",
-                        f"the solver process stopped while solving this shape ({exc}); retry.",
-                        headers={"Retry-After": str(RETRY_AFTER_SECONDS)},
-                    ) from exc
-
-    @contextmanager
-    def _admission(self) -> Iterator[None]:
-        """Count the upload in, or refuse it now. No await between the check and the count, so
-        concurrent requests on the event loop cannot all slip past the bound."""
-        if self.admitted >= self.capacity:
-            raise ProblemError(
-                503,
-                "overloaded",
-                "Overloaded",
-                f"{self.admitted} uploads are already being solved or waiting; retry after {RETRY_AFTER_SECONDS} s.",
-                headers={"Retry-After": str(RETRY_AFTER_SECONDS)},
-            )
-        self.admitted += 1
-        try:
-            yield
-        finally:
-            self.admitted -= 1
+        async with self.limiter:
+            task = (data, file_type, options)
+            future = self._pool.schedule(_solve_task, args=task, timeout=self.timeout_s)
+            try:
+                return await asyncio.wrap_future(future)
+            except TimeoutError as exc:
+                raise SolveTimeout(f"the solve did not finish within {self.timeout_s:g} s") from exc
+            except ProcessExpired as exc:
+                raise ProblemError(
+                    503,
+                    "solver-crashed",
+                    "Solver crashed",
+                    f"the solver process stopped while solving this shape ({exc}); retry.",
+                    headers={"Retry-After": str(RETRY_AFTER_SECONDS)},
+                ) from exc

@@ -38,7 +38,18 @@ class Settings(BaseSettings):
         description="Eigen-solves running at once; more requests wait for a slot.",
     )
     max_queued_solves: int = Field(
-        16, ge=0, description="Uploads that may wait for a solve slot; beyond them, 503 overloaded with Retry-After."
+        16,
+        ge=0,
+        description="Upload requests that may wait for a solve slot, counted on their headers; "
+        "beyond them, 503 overloaded with Retry-After before the body is read.",
+    )
+    max_inflight_upload_bytes: int = Field(
+        512 * 1024 * 1024,
+        gt=0,
+        description="Declared bodies of the upload requests in flight, together; beyond, 503 overloaded.",
+    )
+    body_timeout_seconds: float = Field(
+        60.0, gt=0, description="Time a client has to send a request body once its headers arrived; beyond, 408."
     )
     solve_timeout_seconds: float = Field(
         120.0, gt=0, description="Deadline of one solve; its worker is stopped and the client gets 422 solve-timeout."

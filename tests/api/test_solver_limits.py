@@ -59,7 +59,7 @@ def _idle_worker_address_space_mb() -> float:
     """What a solver worker maps before it solves anything (numpy, scipy, BLAS buffers)."""
 
     async def measure() -> float:
-        pool = SolverPool(1, 0, 60, 0)
+        pool = SolverPool(1, 60, 0)
         await pool.start()
         try:
             return _address_space_mb(pool.worker_pids()[0])
@@ -107,7 +107,7 @@ def test_a_worker_killed_mid_solve_gives_a_retryable_503_and_is_replaced(tmp_pat
 
 def test_a_worker_is_retired_after_its_quota_of_solves():
     async def pids_around_three_solves() -> tuple[list[int], list[int]]:
-        pool = SolverPool(1, 0, 60, 0, tasks_per_worker=2)
+        pool = SolverPool(1, 60, 0, tasks_per_worker=2)
         await pool.start()  # the warm-up counts as the first worker's first task
         try:
             first = pool.worker_pids()
@@ -125,7 +125,7 @@ def test_workers_keep_blas_to_one_thread():
     """A worker per core already fills the machine: a BLAS thread per core on top oversubscribes it."""
 
     async def worker_blas_threads() -> list[int]:
-        pool = SolverPool(1, 0, 60, 0)
+        pool = SolverPool(1, 60, 0)
         await pool.start()
         try:
             libraries = await asyncio.wrap_future(pool._pool.schedule(threadpool_info))

@@ -1,0 +1,120 @@
+"""Upload requests are admitted or refused on their headers, whole, and a stalled body times out.
+
+A real server on loopback and raw sockets, because what is checked is what happens before a
+body arrives: a client that has sent only its headers gets its 503, and one that stops halfway
+through its body gets a 408 and gives its place back.
+"""
+
+import socket
+import time
+
+import httpx
+import pytest
+
+from tests.api.servers import start, wait_ready
+from tests.api.test_backpressure import patch_ply
+from tests.postgres import free_port
+
+BODY_TIMEOUT_S = 5
+CAPACITY = 2  # one solve slot and one waiting place
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    port = free_port()
+    settings = {
+        "SPECTRAL_UNIONS_DATABASE_PATH": str(tmp_path_factory.mktemp("db") / "shapes.sqlite"),
+        "SPECTRAL_UNIONS_MAX_QUEUED_SOLVES": str(CAPACITY - 1),
+        "SPECTRAL_UNIONS_BODY_TIMEOUT_SECONDS": str(BODY_TIMEOUT_S),
+    }
+    process = start(port, settings)
+    try:
+        wait_ready(f"http://127.0.0.1:{port}", process)
+        yield port
+    finally:
+        process.kill()
+        process.wait(timeout=30)
+
+
+def _stalled_upload(port: int, path: str = "/v1/spectrum", body: bytes = b"--b\r\n") -> socket.socket:
+    """A multipart POST that declares 100 kB and sends its headers and ``body`` only."""
+    connection = socket.create_connection(("127.0.0.1", port), timeout=30)
+    head = (
+        f"POST {path} HTTP/1.1\r\nHost: test\r\nContent-Type: multipart/form-data; boundary=b\r\n"
+        "Content-Length: 100000\r\n\r\n"
+    )
+    connection.sendall(head.encode() + body)
+    return connection
+
+
+def _response(connection: socket.socket) -> tuple[int, dict[str, str], str]:
+    """Status, headers and body of the one response on ``connection`` (read until it closes or is whole)."""
+    data = b""
+    while b"\r\n\r\n" not in data:
+        chunk = connection.recv(65536)
+        if not chunk:
+            break
+        data += chunk
+    head, _, body = data.partition(b"\r\n\r\n")
+    lines = head.decode().split("\r\n")
+    headers = {k.lower(): v.strip() for k, _, v in (line.partition(":") for line in lines[1:])}
+    while len(body) < int(headers.get("content-length", 0)):
+        body += connection.recv(65536)
+    return int(lines[0].split()[1]), headers, body.decode()
+
+
+def _solves(port: int) -> float:
+    text = httpx.get(f"http://127.0.0.1:{port}/metrics").text
+    line = next(line for line in text.splitlines() if line.startswith("spectral_unions_solve_seconds_count"))
+    return float(line.split()[1])
+
+
+def test_an_upload_beyond_capacity_is_refused_on_its_headers_without_its_body(server):
+    holders = [_stalled_upload(server) for _ in range(CAPACITY)]
+    try:
+        time.sleep(0.5)  # the holders' headers have arrived and been counted in
+        late = _stalled_upload(server, body=b"")  # headers only: not one byte of its body is sent
+        status, headers, body = _response(late)
+        assert status == 503, body
+        assert headers["content-type"] == "application/problem+json"
+        assert headers["retry-after"] == "1"
+        assert '"/problems/overloaded"' in body
+    finally:
+        for holder in holders:
+            holder.close()
+    response = httpx.post(f"http://127.0.0.1:{server}/v1/spectrum", files={"file": ("p.ply", patch_ply())})
+    assert response.status_code == 200, response.text  # the closed holders gave their places back
+
+
+def test_a_two_file_union_is_refused_whole_before_any_of_its_files_is_solved(server):
+    holders = [_stalled_upload(server) for _ in range(CAPACITY)]
+    try:
+        time.sleep(0.5)
+        before = _solves(server)
+        files = [("files", ("a.ply", patch_ply())), ("files", ("b.ply", patch_ply()))]
+        response = httpx.post(f"http://127.0.0.1:{server}/v1/union", files=files)
+        assert response.status_code == 503, response.text
+        assert response.json()["type"] == "/problems/overloaded"
+        assert _solves(server) == before
+    finally:
+        for holder in holders:
+            holder.close()
+    response = httpx.post(f"http://127.0.0.1:{server}/v1/union", files=files)
+    assert response.status_code == 200, response.text
+    assert _solves(server) == before + 2
+
+
+def test_a_body_that_stalls_is_answered_408_and_its_place_is_freed(server):
+    stalled = _stalled_upload(server)
+    status, headers, body = _response(stalled)
+    stalled.close()
+    assert status == 408, body
+    assert '"/problems/body-timeout"' in body and "(5 bytes received)" in body
+    assert headers["connection"] == "close"
+    holders = [_stalled_upload(server) for _ in range(CAPACITY - 1)]
+    try:
+        response = httpx.post(f"http://127.0.0.1:{server}/v1/spectrum", files={"file": ("p.ply", patch_ply())})
+        assert response.status_code == 200, response.text
+    finally:
+        for holder in holders:
+            holder.close()
