@@ -4,10 +4,11 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 import anyio
-from fastapi import FastAPI
+from fastapi import Depends, FastAPI
 
 from app import __version__
 from app.api.admission import AdmissionMiddleware
+from app.api.deps import refuse_repeated_parameters
 from app.api.metrics import MetricsMiddleware
 from app.api.metrics import router as metrics_router
 from app.api.operands import MAX_OPERANDS
@@ -57,6 +58,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version=__version__,
         summary="Laplace–Beltrami spectra of partial deformable 3D shapes.",
         lifespan=lifespan,
+        dependencies=[Depends(refuse_repeated_parameters)],
         form_limits={"max_files": MAX_OPERANDS, "max_fields": MAX_FORM_FIELDS, "max_part_size": MAX_FORM_FIELD_BYTES},
     )
     app.state.settings = settings

@@ -6,14 +6,13 @@ lists) are checked. Operands are taken in that order: files as uploaded, then sp
 error names the operand it is about.
 """
 
-import json
 import time
 from dataclasses import dataclass
 from typing import Literal
 
-import numpy as np
 from fastapi import Request, UploadFile
 
+from app.api import form_json
 from app.api.metrics import SOLVES
 from app.api.solver import SolverPool
 from app.core.config import Settings
@@ -36,20 +35,13 @@ def parse_spectra(text: str | None, k: int) -> list[list[float]]:
     """The ``spectra`` form field as checked eigenvalue lists."""
     if text is None or not text.strip():
         return []
-    try:
-        values = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InvalidSpectrum(f"spectra must be a JSON list of eigenvalue lists: {exc}") from exc
+    values = form_json.loads(text, "spectra", InvalidSpectrum)
     if not isinstance(values, list) or not all(isinstance(v, list) for v in values):
         raise InvalidSpectrum("spectra must be a JSON list of eigenvalue lists")
-    checked = []
-    for index, value in enumerate(values):
-        try:
-            array = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise InvalidSpectrum(f"spectra[{index}] must hold numbers only") from exc
-        checked.append(checked_spectrum(array, k, f"spectra[{index}]").tolist())
-    return checked
+    return [
+        checked_spectrum(form_json.number_list(value, f"spectra[{i}]", InvalidSpectrum), k, f"spectra[{i}]").tolist()
+        for i, value in enumerate(values)
+    ]
 
 
 def upload_options(settings: Settings, k: int, units: Literal["m", "cm", "mm"], scale: float | None) -> SpectrumOptions:

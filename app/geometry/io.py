@@ -141,8 +141,14 @@ def _load_npy(data: bytes) -> PointCloud:
         points = np.load(io.BytesIO(data), allow_pickle=False)
     except Exception as exc:  # numpy raises several unrelated types for bad bytes
         raise UnreadableFile(f"not a valid .npy file: {exc}") from exc
-    if points.ndim != 2 or points.shape[1] != 3 or not np.issubdtype(points.dtype, np.number):
-        raise UnreadableFile(f"a .npy point cloud must be a numeric (n, 3) array, got {points.shape}")
+    if not isinstance(points, np.ndarray):  # np.load opens an .npz archive as a lazy mapping
+        points.close()
+        raise UnreadableFile("this is an .npz archive, not an .npy array: send the (n, 3) array itself")
+    real = np.issubdtype(points.dtype, np.integer) or np.issubdtype(points.dtype, np.floating)
+    if points.ndim != 2 or points.shape[1] != 3 or not real:
+        raise UnreadableFile(
+            f"a .npy point cloud must be a real-valued (n, 3) array, got {points.dtype} {points.shape}"
+        )
     return PointCloud(np.asarray(points, dtype=np.float64))
 
 

@@ -84,7 +84,7 @@ def cloud_spectrum(cloud: PointCloud, options: SpectrumOptions, scale: float = 1
         started,
         kind="points",
         faces_dropped=0,
-        components_dropped=0,
+        components_dropped=prepared.components_dropped,
         holes_filled=0,
         scale=scale,
     )

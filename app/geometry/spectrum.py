@@ -20,6 +20,12 @@ from app.geometry.laplacian import Operators
 
 DEFAULT_K = 20
 MAX_K = 200
+# The largest eigenvalue a spectrum may hold, solved or sent: a shape 0.1 mm across (the
+# smallest accepted) has λ_200 ≈ 1e12 1/m². The models run in float32 (max 3.4e38), and a
+# value cast past that range came back as null from the union and the localizer.
+MAX_EIGENVALUE = 1e15
+# Solvers return λ₁ of a closed surface as ±1e-12·λ_k, and ties as tiny inversions.
+ORDER_TOLERANCE = 1e-6
 # The shift sits below λ₁ = 0 of a closed surface by this fraction of 1/area, i.e. well under
 # any eigenvalue of the shape but on its own scale, so the method is scale-equivariant.
 RELATIVE_SHIFT = 1e-2
@@ -97,12 +103,27 @@ def eigenpairs(
         )
     except (ValueError, sla.ArpackError) as exc:
         raise SolverFailure(f"the eigen-solver failed on this shape: {exc}") from exc
-    if not vectors:
-        return np.sort(result), None
-    values, standard_vectors = result
+    values, standard_vectors = (result, None) if not vectors else result
     order = np.argsort(values)
+    _require_a_spectrum(values[order])
+    if standard_vectors is None:
+        return values[order], None
     # x = M^-1/2 y turns orthonormal eigenvectors of C into M-orthonormal ones of (S, M).
     return values[order], inverse_root[:, None] * standard_vectors[:, order]
+
+
+def _require_a_spectrum(values: np.ndarray) -> None:
+    """A Laplace–Beltrami spectrum is finite and non-negative: anything else is the discrete
+    operator failing on this shape (a point cloud with one far outlier gave λ₁ = −0.021)."""
+    if not np.isfinite(values).all():
+        raise SolverFailure("the eigen-solver returned non-finite eigenvalues for this shape")
+    if values[0] < -ORDER_TOLERANCE * max(float(np.abs(values).max()), 1.0):
+        raise SolverFailure(
+            f"this shape's Laplacian has a negative eigenvalue ({values[0]:.3g}), which no surface has: "
+            "a point cloud with far outliers does this; remove them"
+        )
+    if values[-1] > MAX_EIGENVALUE:
+        raise SolverFailure(f"eigenvalues above {MAX_EIGENVALUE:g} 1/m² are no scan's (λ_k = {values[-1]:.3g})")
 
 
 def _shifted_upper(stiffness: sp.csr_matrix, free: np.ndarray, scale: np.ndarray, sigma: float) -> sp.csc_matrix:

@@ -8,6 +8,9 @@ Every check here exists because the eigen-solver would otherwise fail late and o
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from app.geometry.errors import InvalidGeometry, MissingBoundary
 from app.geometry.shapes import Mesh, PointCloud
@@ -26,6 +29,13 @@ from app.geometry.topology import (
 # robust-laplacian's assembly is quadratic in the faces around one edge (20 000 fins on an edge
 # of a disk took 8 s), so an edge shared by more faces than this is refused, not solved.
 MAX_FACES_PER_EDGE = 16
+# Point-cloud clusters (see _largest_cluster): neighbours looked at, and how far past the typical
+# neighbour distance a link may reach before two points belong to different clusters.
+CLUSTER_NEIGHBOURS = 8
+CLUSTER_GAP = 10.0
+# A shape smaller than this is no scan of a body part. At this size λ_200 is ~1e12 1/m², far
+# inside MAX_EIGENVALUE, so a spectrum the service solves is always one its models can take.
+MIN_EXTENT_M = 1e-4
 
 
 @dataclass(frozen=True)
@@ -45,10 +55,13 @@ class PreparedCloud:
 
     cloud: PointCloud
     boundary: np.ndarray | None
+    components_dropped: int
 
 
-def require_finite(points: np.ndarray) -> None:
-    """Refuse NaN or infinite coordinates, and coordinates too large to square safely."""
+def require_scan_coordinates(points: np.ndarray) -> None:
+    """Refuse NaN or infinite coordinates, coordinates too large to square safely, and a shape
+    too small to be a scan (its spectrum would pass what the models can represent: a mesh
+    scaled by 1e-30 had λ₁ ≈ 4.5e60)."""
     if points.size == 0:
         raise InvalidGeometry("the shape has no vertices")
     if not np.all(np.isfinite(points)):
@@ -56,6 +69,11 @@ def require_finite(points: np.ndarray) -> None:
         raise InvalidGeometry(f"{bad} vertices have NaN or infinite coordinates")
     if np.abs(points).max() > 1e12:
         raise InvalidGeometry("coordinates above 1e12 m cannot be a scanned surface")
+    if _extent(points) < MIN_EXTENT_M:
+        raise InvalidGeometry(
+            f"the shape spans {_extent(points):.3g} m, under the {MIN_EXTENT_M:g} m of the smallest scan "
+            "(are its units right?)"
+        )
 
 
 def prepare_mesh(mesh: Mesh, *, k: int, max_hole_edges: int) -> PreparedMesh:
@@ -68,7 +86,7 @@ def prepare_mesh(mesh: Mesh, *, k: int, max_hole_edges: int) -> PreparedMesh:
         With a message that says which check failed.
     """
     vertices, faces = mesh.vertices, mesh.faces
-    require_finite(vertices)
+    require_scan_coordinates(vertices)
     _require_valid_faces(faces, len(vertices))
     vertices, faces = _merge_duplicate_vertices(vertices, faces)
     given = len(faces)
@@ -90,17 +108,20 @@ def prepare_mesh(mesh: Mesh, *, k: int, max_hole_edges: int) -> PreparedMesh:
 
 
 def prepare_cloud(cloud: PointCloud, *, k: int, closed: bool, boundary_indices: list[int] | None) -> PreparedCloud:
-    """Check a point cloud and settle its boundary: declared closed, flagged in the file, or listed.
+    """Check a point cloud, keep its largest cluster, and settle its boundary: declared closed,
+    flagged in the file, or listed.
 
     Automatic boundary detection is not attempted: angular-gap detectors flag interior points
     wherever two surfaces nearly touch (fingers, armpits), with spectral errors over 100 %.
     """
     points = cloud.points
-    require_finite(points)
+    require_scan_coordinates(points)
     points, first = np.unique(points, axis=0, return_index=True)
     flags = None if cloud.boundary is None else cloud.boundary[first]
     if boundary_indices is not None:
         flags = _mask_from_indices(boundary_indices, len(cloud.points))[first]
+    keep, dropped = _largest_cluster(points)
+    points, flags = points[keep], None if flags is None else flags[keep]
     if closed:
         flags = None
     elif flags is None or not flags.any():
@@ -110,7 +131,30 @@ def prepare_cloud(cloud: PointCloud, *, k: int, closed: bool, boundary_indices: 
         )
     free = len(points) if flags is None else int(np.count_nonzero(~flags))
     _require_room_for(k, free)
-    return PreparedCloud(PointCloud(points, flags), flags)
+    return PreparedCloud(PointCloud(points, flags), flags, dropped)
+
+
+def _largest_cluster(points: np.ndarray) -> tuple[np.ndarray, int]:
+    """The points of the largest cluster, and how many other clusters were dropped.
+
+    The cloud's analogue of a mesh's largest component: two points are linked when one is
+    among the other's nearest neighbours and they are no further apart than CLUSTER_GAP times
+    the cloud's typical neighbour distance. A depth camera's flying pixels and a stray far
+    point fall out as clusters of their own; kept, one far point gave a partial cloud a
+    negative λ₁ and a closed one a second near-zero eigenvalue.
+    """
+    neighbours = min(CLUSTER_NEIGHBOURS, len(points) - 1)
+    if neighbours < 1:
+        return np.ones(len(points), dtype=bool), 0
+    distances, indices = cKDTree(points).query(points, k=neighbours + 1)
+    typical = float(np.median(distances[:, -1]))
+    linked = distances[:, 1:] <= CLUSTER_GAP * typical
+    rows = np.repeat(np.arange(len(points)), neighbours)[linked.ravel()]
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, indices[:, 1:].ravel()[linked.ravel()])), (len(points),) * 2)
+    count, labels = connected_components(graph, directed=False)
+    if count == 1:
+        return np.ones(len(points), dtype=bool), 0
+    return labels == np.bincount(labels).argmax(), count - 1
 
 
 def _mask_from_indices(indices: list[int], n: int) -> np.ndarray:

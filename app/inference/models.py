@@ -15,6 +15,7 @@ import onnxruntime as ort
 
 from app.geometry.laplacian import mesh_operators
 from app.inference.manifest import verify_manifest
+from app.inference.spectra import InvalidSpectrum
 from app.inference.template import PART_NAMES, Template
 
 UNION_FILE, LOCALIZER_FILE = "union.onnx", "localizer.onnx"
@@ -45,6 +46,13 @@ class Region:
     vertices: np.ndarray
     area_fraction: float
     part_coverage: dict[str, float]
+
+
+def _require_finite(*outputs: np.ndarray) -> None:
+    """The last guard before a response: a non-finite output would be serialized as null. Spectra
+    are bounded on the way in (``MAX_EIGENVALUE``), so this is not expected to fire."""
+    if not all(np.isfinite(output).all() for output in outputs):
+        raise InvalidSpectrum("the models cannot represent these spectra: their output is not finite")
 
 
 def _session(path: Path, threads: int) -> ort.InferenceSession:
@@ -80,11 +88,13 @@ class SpectralModels:
             feeds = {"spectrum_a": current[None].astype(np.float32), "spectrum_b": other[None].astype(np.float32)}
             union, sigma = self.union_session.run(None, feeds)
             current, sigma = union[0], sigma[0]
+        _require_finite(current, sigma)
         return Union(current.astype(np.float64), sigma.astype(np.float64))
 
     def localize(self, spectrum: np.ndarray) -> Region:
         """The template region whose spectrum this is (up to left/right: spectra cannot tell)."""
         (probability,) = self.localizer_session.run(None, {"spectrum": spectrum[None].astype(np.float32)})
+        _require_finite(probability)
         inside = probability[0] >= MASK_THRESHOLD
         area = self.vertex_area
         labels = self.template.labels

@@ -8,9 +8,7 @@ reported as such instead of producing a confident-looking union of garbage.
 import numpy as np
 
 from app.geometry.errors import GeometryError
-
-# Eigen-solvers return λ₁ of a closed surface as ±1e-12, and ties as tiny inversions.
-ORDER_TOLERANCE = 1e-6
+from app.geometry.spectrum import MAX_EIGENVALUE, ORDER_TOLERANCE
 
 
 class InvalidSpectrum(GeometryError):
@@ -27,6 +25,11 @@ def checked_spectrum(values: list[float] | np.ndarray, k: int, name: str = "spec
         raise InvalidSpectrum(f"{name} must hold exactly {k} eigenvalues, got {spectrum.size}")
     if not np.isfinite(spectrum).all():
         raise InvalidSpectrum(f"{name} holds NaN or infinite values")
+    if spectrum.max() > MAX_EIGENVALUE:
+        raise InvalidSpectrum(
+            f"{name} holds {spectrum.max():.3g}; eigenvalues above {MAX_EIGENVALUE:g} 1/m² are no scan's "
+            "and past what the models represent"
+        )
     scale = max(float(np.abs(spectrum).max()), 1.0)
     if spectrum.min() < -ORDER_TOLERANCE * scale:
         raise InvalidSpectrum(f"{name} has negative eigenvalues: Laplace–Beltrami spectra are ≥ 0")

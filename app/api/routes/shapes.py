@@ -16,6 +16,7 @@ from app.api.deps import SettingsDep
 from app.api.operands import solve_upload, upload_options
 from app.api.problems import UPLOAD_PROBLEMS, ProblemError, problem_responses
 from app.api.routes.unions import FilesField, ScaleQuery, SpectraField, UnitsQuery, union_of_operands
+from app.geometry.errors import InvalidGeometry
 from app.geometry.io import resolve_file_type
 from app.retrieval.store import ShapeStore
 
@@ -96,6 +97,11 @@ async def add_shape(
     _require_key(settings, x_api_key)
     options = upload_options(settings, request.app.state.resources.require_models().k, units, scale)
     report = await solve_upload(request, await file.read(), resolve_file_type(file.filename, None), options)
+    if report.boundary != "none":
+        raise InvalidGeometry(
+            "the store holds complete shapes, and this one has a boundary (its spectrum is a partial "
+            "scan's, Dirichlet): send a closed surface, or unite the parts first"
+        )
     record = await anyio.to_thread.run_sync(
         (await _store(request)).add, label, np.asarray(report.eigenvalues), file.filename or "upload"
     )

@@ -1,10 +1,10 @@
 """``POST /v1/spectrum``: the truncated Laplace–Beltrami spectrum of an uploaded shape."""
 
-import json
 from typing import Annotated, Literal
 
 from fastapi import APIRouter, File, Form, Query, Request, UploadFile
 
+from app.api import form_json
 from app.api.deps import SettingsDep
 from app.api.operands import solve_upload
 from app.api.problems import UPLOAD_PROBLEMS, problem_responses
@@ -50,10 +50,4 @@ async def spectrum(
 def _parse_indices(text: str | None) -> list[int] | None:
     if text is None:
         return None
-    try:
-        indices = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InvalidGeometry(f"boundary must be a JSON list of integers: {exc}") from exc
-    if not isinstance(indices, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in indices):
-        raise InvalidGeometry("boundary must be a JSON list of integers")
-    return indices
+    return form_json.index_list(form_json.loads(text, "boundary", InvalidGeometry), "boundary", InvalidGeometry)
