@@ -1,7 +1,10 @@
 """Prometheus metrics: requests and latencies per route, eigen-solve and inference times.
 
 Requests are labelled by the name of the endpoint that handled them (``delete_shape``), never by
-the raw path, so a client cannot blow up the number of series. Served at ``/metrics``.
+the raw path, and by their method only when it is one HTTP defines (else ``other``): uvicorn
+accepts any method token, and 3 000 made-up methods had grown ``/metrics`` from 45 KB to 25 MB.
+Every label takes a bounded set of values, so a client cannot blow up the number of series.
+Served at ``/metrics``.
 """
 
 import time
@@ -23,6 +26,8 @@ INFERENCE = Histogram(
     ["model"],
     buckets=(0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25),
 )
+
+KNOWN_METHODS = frozenset({"GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS", "TRACE", "CONNECT"})
 
 router = APIRouter(tags=["health"])
 
@@ -56,5 +61,6 @@ class MetricsMiddleware:
             await self.app(scope, receive, record_status)
         finally:
             handler = getattr(scope.get("route"), "name", "unmatched")
-            REQUESTS.labels(handler, scope["method"], str(status)).inc()
+            method = scope["method"] if scope["method"] in KNOWN_METHODS else "other"
+            REQUESTS.labels(handler, method, str(status)).inc()
             LATENCY.labels(handler).observe(time.perf_counter() - started)

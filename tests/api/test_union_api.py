@@ -152,6 +152,16 @@ def test_metrics_count_requests_by_endpoint(client, parts):
     assert 'spectral_unions_inference_seconds_count{model="union"}' in text
 
 
+def test_made_up_http_methods_do_not_grow_the_metrics(client):
+    """uvicorn passes any method token through; each one used to become a new series."""
+    for index in range(40):
+        assert client.request(f"BREW{index}", "/v1/models").status_code == 405
+    text = client.get("/metrics").text
+    assert "BREW" not in text
+    line = next(line for line in text.splitlines() if 'method="other",status="405"' in line)
+    assert float(line.split()[-1]) >= 40
+
+
 def test_localize_as_ply_colours_the_region(client, parts, template):
     spectra = {"spectra": json.dumps([parts[2]])}
     region = client.post("/v1/localize", data=spectra).json()["vertices"]
