@@ -51,7 +51,10 @@ class AdmissionMiddleware:
         )
         response = problem_response(503, "overloaded", "Overloaded", detail)
         response.headers["Retry-After"] = str(RETRY_AFTER_SECONDS)
-        response.headers["Connection"] = "close"  # the unread body must not be taken for a next request
+        # The body is never asked for: a client that sent ``Expect: 100-continue`` (curl does,
+        # for large bodies) gets no 100 and never sends it; one that sends it anyway has it
+        # discarded by uvicorn, and its connection stays usable (closing it on unread bytes
+        # would reset it, and the client would see no 503 at all).
         await response(scope, receive, send)
 
 
