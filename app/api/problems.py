@@ -54,12 +54,29 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
     401: [("invalid-api-key", "Invalid API key", "X-API-Key is missing or does not match.")],
     403: [("writes-disabled", "Writes disabled", "No API key is configured, so /v1/shapes is read-only.")],
     404: [("shape-not-found", "Shape not found", "No stored shape has id 3f2a….")],
+    408: [
+        (
+            "body-timeout",
+            "Request body too slow",
+            "the request body was not complete 60 s after its headers (12288 bytes received)",
+        )
+    ],
     413: [("upload-too-large", "Upload too large", "The request body exceeds 67108864 bytes.")],
     415: [("unsupported-file-type", "Unsupported file type", "'.zip' is not an accepted type (ply, obj, …).")],
     422: [
         ("invalid-spectrum", "Invalid spectrum", "operand 2 (spectra[1]): eigenvalues must be non-decreasing."),
         ("invalid-geometry", "Invalid geometry", "operand 1 (files[0], scan.ply): coordinates contain NaN or inf."),
         ("invalid-request", "Invalid request", "query.top: Input should be less than or equal to 100"),
+        (
+            "too-many-faces",
+            "Too many faces",
+            "files[0] scan.ply: the PLY header declares 900000000 faces; the cap is 400000",
+        ),
+        (
+            "scene-too-large",
+            "Scene too large",
+            "files[0] scan.glb: the GLB scene has 30000 nodes; at most 1000 are accepted",
+        ),
         ("solve-timeout", "Solve ran past its deadline", "files[0] scan.ply: the solve did not finish within 120 s"),
         (
             "solve-memory-exceeded",
@@ -75,7 +92,11 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
         ),
         ("models-unavailable", "Models unavailable", "ModelsCorrupt: union.onnx is missing from /srv/models"),
         ("database-unavailable", "Database unavailable", "PostgreSQL: connection refused"),
-        ("overloaded", "Overloaded", "16 uploads are already waiting for a solve slot; retry after 1 s."),
+        (
+            "overloaded",
+            "Overloaded",
+            "18 upload requests (6291456 bytes) are already being received or solved; retry after 1 s.",
+        ),
         ("solver-crashed", "Solver crashed", "the solver process stopped while solving this shape (…); retry."),
         ("upload-storage-full", "Upload storage full", "the server has no temporary space left to receive this upload"),
     ],
@@ -83,7 +104,7 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
 
 
 # What any route that takes an uploaded file can answer besides its own errors.
-UPLOAD_PROBLEMS = (400, 413, 415, 422, 503)
+UPLOAD_PROBLEMS = (400, 408, 413, 415, 422, 503)
 
 
 def problem_responses(*statuses: int, slugs: set[str] | None = None) -> dict[int | str, dict]:
