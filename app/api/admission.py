@@ -12,6 +12,7 @@ upload cap). The rest get 503 ``overloaded`` with ``Retry-After`` at once, their
 
 from starlette.types import ASGIApp, Receive, Scope, Send
 
+from app.api.metrics import UPLOADS_IN_FLIGHT
 from app.api.problems import problem_response
 from app.api.solver import RETRY_AFTER_SECONDS
 
@@ -38,11 +39,13 @@ class AdmissionMiddleware:
             return
         self.requests += 1
         self.bytes += charge
+        UPLOADS_IN_FLIGHT.inc()
         try:
             await self.app(scope, receive, send)
         finally:
             self.requests -= 1
             self.bytes -= charge
+            UPLOADS_IN_FLIGHT.dec()
 
     async def _refuse(self, scope: Scope, receive: Receive, send: Send) -> None:
         detail = (

@@ -10,11 +10,14 @@ Served at ``/metrics``.
 import time
 
 from fastapi import APIRouter, Response
-from prometheus_client import CONTENT_TYPE_LATEST, Counter, Histogram, generate_latest
+from prometheus_client import CONTENT_TYPE_LATEST, Counter, Gauge, Histogram, generate_latest
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 REQUESTS = Counter("spectral_unions_requests_total", "HTTP requests answered.", ["handler", "method", "status"])
 LATENCY = Histogram("spectral_unions_request_seconds", "Time to answer a request.", ["handler"])
+UPLOADS_IN_FLIGHT = Gauge(
+    "spectral_unions_upload_requests_in_flight", "Upload requests admitted and not yet answered (app.api.admission)."
+)
 SOLVES = Histogram(
     "spectral_unions_solve_seconds",
     "Laplacian assembly plus eigen-solve of one shape.",

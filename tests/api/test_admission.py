@@ -63,16 +63,36 @@ def _response(connection: socket.socket) -> tuple[int, dict[str, str], str]:
     return int(lines[0].split()[1]), headers, body.decode()
 
 
-def _solves(port: int) -> float:
+def _metric(port: int, name: str) -> float:
     text = httpx.get(f"http://127.0.0.1:{port}/metrics").text
-    line = next(line for line in text.splitlines() if line.startswith("spectral_unions_solve_seconds_count"))
-    return float(line.split()[1])
+    return float(next(line for line in text.splitlines() if line.startswith(name + " ")).split()[1])
+
+
+def _solves(port: int) -> float:
+    return _metric(port, "spectral_unions_solve_seconds_count")
+
+
+def _held(port: int, count: int) -> list[socket.socket]:
+    """``count`` stalled uploads, returned once the server has counted every one of them in."""
+    holders = [_stalled_upload(port) for _ in range(count)]
+    deadline = time.monotonic() + 30
+    while _metric(port, "spectral_unions_upload_requests_in_flight") < count and time.monotonic() < deadline:
+        time.sleep(0.02)
+    return holders
+
+
+def _release(port: int, holders: list[socket.socket]) -> None:
+    """Close the stalled uploads and wait until the server has given their places back."""
+    for holder in holders:
+        holder.close()
+    deadline = time.monotonic() + 30
+    while _metric(port, "spectral_unions_upload_requests_in_flight") > 0 and time.monotonic() < deadline:
+        time.sleep(0.02)
 
 
 def test_an_upload_beyond_capacity_is_refused_on_its_headers_without_its_body(server):
-    holders = [_stalled_upload(server) for _ in range(CAPACITY)]
+    holders = _held(server, CAPACITY)
     try:
-        time.sleep(0.5)  # the holders' headers have arrived and been counted in
         late = _stalled_upload(server, body=b"")  # headers only: not one byte of its body is sent
         status, headers, body = _response(late)
         assert status == 503, body
@@ -80,16 +100,14 @@ def test_an_upload_beyond_capacity_is_refused_on_its_headers_without_its_body(se
         assert headers["retry-after"] == "1"
         assert '"/problems/overloaded"' in body
     finally:
-        for holder in holders:
-            holder.close()
+        _release(server, holders)
     response = httpx.post(f"http://127.0.0.1:{server}/v1/spectrum", files={"file": ("p.ply", patch_ply())})
     assert response.status_code == 200, response.text  # the closed holders gave their places back
 
 
 def test_a_two_file_union_is_refused_whole_before_any_of_its_files_is_solved(server):
-    holders = [_stalled_upload(server) for _ in range(CAPACITY)]
+    holders = _held(server, CAPACITY)
     try:
-        time.sleep(0.5)
         before = _solves(server)
         files = [("files", ("a.ply", patch_ply())), ("files", ("b.ply", patch_ply()))]
         response = httpx.post(f"http://127.0.0.1:{server}/v1/union", files=files)
@@ -97,8 +115,7 @@ def test_a_two_file_union_is_refused_whole_before_any_of_its_files_is_solved(ser
         assert response.json()["type"] == "/problems/overloaded"
         assert _solves(server) == before
     finally:
-        for holder in holders:
-            holder.close()
+        _release(server, holders)
     response = httpx.post(f"http://127.0.0.1:{server}/v1/union", files=files)
     assert response.status_code == 200, response.text
     assert _solves(server) == before + 2
@@ -111,10 +128,9 @@ def test_a_body_that_stalls_is_answered_408_and_its_place_is_freed(server):
     assert status == 408, body
     assert '"/problems/body-timeout"' in body and "(5 bytes received)" in body
     assert headers["connection"] == "close"
-    holders = [_stalled_upload(server) for _ in range(CAPACITY - 1)]
+    holders = _held(server, CAPACITY - 1)
     try:
         response = httpx.post(f"http://127.0.0.1:{server}/v1/spectrum", files={"file": ("p.ply", patch_ply())})
         assert response.status_code == 200, response.text
     finally:
-        for holder in holders:
-            holder.close()
+        _release(server, holders)
