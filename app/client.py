@@ -1,0 +1,182 @@
+"""A typed Python client of the service (httpx): every endpoint, answers as the service's own
+response models, every error as one exception carrying the problem body.
+
+The response classes are the ones the routes declare (``app.api.routes``) and the spectrum
+report is the pipeline's dataclass, so the client cannot drift from what the service sends.
+
+    with Client("http://127.0.0.1:8000") as client:
+        part = client.spectrum("no_head.ply")
+        union = client.union(files=["no_left_hand.ply"], spectra=[part.eigenvalues])
+"""
+
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Literal, Self
+
+import httpx
+
+from app.api.problems import PROBLEM_MEDIA_TYPE, Problem
+from app.api.routes.shapes import RetrieveResponse, ShapeOut, ShapePage
+from app.api.routes.unions import LocalizeResponse, ModelsResponse, UnionResponse
+from app.geometry.pipeline import SpectrumReport
+from app.geometry.spectrum import DEFAULT_K
+
+Scan = str | os.PathLike[str] | tuple[str, bytes]  # a file path, or (file name, its bytes)
+Units = Literal["m", "cm", "mm"]
+DEFAULT_URL = "http://127.0.0.1:8000"
+
+
+class ServiceProblem(Exception):
+    """Any non-2xx answer, with its problem body (``type`` is what to branch on)."""
+
+    def __init__(self, problem: Problem) -> None:
+        super().__init__(f"{problem.status} {problem.type}: {problem.detail}")
+        self.problem = problem
+
+    @property
+    def status(self) -> int:
+        return self.problem.status
+
+    @property
+    def type(self) -> str:
+        return self.problem.type
+
+
+class Client:
+    """The service at ``base_url``; ``api_key`` is needed for writes to ``/v1/shapes``.
+
+    ``http`` may be an ``httpx.Client`` of the caller's (its base URL is used as it is): a
+    FastAPI ``TestClient`` makes the client run against an app in the same process.
+    """
+
+    def __init__(
+        self,
+        base_url: str = DEFAULT_URL,
+        *,
+        api_key: str | None = None,
+        timeout: float = 180.0,
+        http: httpx.Client | None = None,
+    ) -> None:
+        self._owned = http is None
+        self._http = http or httpx.Client(base_url=base_url, timeout=timeout)
+        self._api_key = api_key
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the connection pool, unless it was the caller's."""
+        if self._owned:
+            self._http.close()
+
+    def spectrum(
+        self,
+        scan: Scan,
+        *,
+        k: int = DEFAULT_K,
+        units: Units = "m",
+        scale: float | None = None,
+        closed: bool = False,
+        boundary: Sequence[int] | None = None,
+    ) -> SpectrumReport:
+        """The first ``k`` eigenvalues of one scan (Dirichlet where it has a boundary), in 1/m²."""
+        params = _params(k=k, units=units, scale=scale, closed=closed)
+        data = {"boundary": json.dumps(list(boundary))} if boundary is not None else None
+        body = self._post("/v1/spectrum", params, files=[("file", _part(scan))], data=data)
+        return SpectrumReport(**body)
+
+    def union(
+        self,
+        files: Sequence[Scan] = (),
+        spectra: Sequence[Sequence[float]] = (),
+        *,
+        units: Units = "m",
+        scale: float | None = None,
+    ) -> UnionResponse:
+        """The union's spectrum and its 90 % interval; files first, then spectra, folded left to right."""
+        return UnionResponse(**self._operands("/v1/union", files, spectra, _params(units=units, scale=scale)))
+
+    def localize(
+        self,
+        files: Sequence[Scan] = (),
+        spectra: Sequence[Sequence[float]] = (),
+        *,
+        units: Units = "m",
+        scale: float | None = None,
+    ) -> LocalizeResponse:
+        """The union, its region on the template body and the covered share of each body part."""
+        return LocalizeResponse(**self._operands("/v1/localize", files, spectra, _params(units=units, scale=scale)))
+
+    def retrieve(
+        self,
+        files: Sequence[Scan] = (),
+        spectra: Sequence[Sequence[float]] = (),
+        *,
+        top: int = 10,
+        units: Units = "m",
+        scale: float | None = None,
+    ) -> RetrieveResponse:
+        """The stored complete shapes nearest to the union of the operands."""
+        params = _params(top=top, units=units, scale=scale)
+        return RetrieveResponse(**self._operands("/v1/retrieve", files, spectra, params))
+
+    def models(self) -> ModelsResponse:
+        """What the service has loaded: model version, k, template, database."""
+        return ModelsResponse(**self._answer(self._http.get("/v1/models")))
+
+    def shapes(self, *, offset: int = 0, limit: int = 50) -> ShapePage:
+        """One page of the stored complete shapes, oldest first."""
+        return ShapePage(**self._answer(self._http.get("/v1/shapes", params={"offset": offset, "limit": limit})))
+
+    def add_shape(self, scan: Scan, label: str, *, units: Units = "m", scale: float | None = None) -> ShapeOut:
+        """Store a complete (closed) shape's spectrum under an identity label (needs the API key)."""
+        body = self._post(
+            "/v1/shapes", _params(units=units, scale=scale), files=[("file", _part(scan))], data={"label": label}
+        )
+        return ShapeOut(**body)
+
+    def delete_shape(self, shape_id: str) -> None:
+        """Remove a stored shape (needs the API key)."""
+        self._answer(self._http.delete(f"/v1/shapes/{shape_id}", headers=self._key_header()))
+
+    def _operands(self, path: str, files: Sequence[Scan], spectra: Sequence[Sequence[float]], params: dict) -> dict:
+        data = {"spectra": json.dumps([[float(v) for v in s] for s in spectra])} if spectra else None
+        return self._post(path, params, files=[("files", _part(scan)) for scan in files] or None, data=data)
+
+    def _post(self, path: str, params: dict, *, files: list | None, data: dict | None) -> dict:
+        response = self._http.post(path, params=params, files=files, data=data, headers=self._key_header())
+        return self._answer(response)
+
+    def _key_header(self) -> dict[str, str]:
+        return {"X-API-Key": self._api_key} if self._api_key else {}
+
+    @staticmethod
+    def _answer(response: httpx.Response) -> dict:
+        """The JSON body of a 2xx (``{}`` for 204), or :class:`ServiceProblem`."""
+        if response.is_success:
+            return response.json() if response.content else {}
+        if response.headers.get("content-type", "").startswith(PROBLEM_MEDIA_TYPE):
+            raise ServiceProblem(Problem(**response.json()))
+        # Not the service's own answer (a proxy's HTML page, say): the same exception, built here.
+        raise ServiceProblem(
+            Problem(type="about:blank", title=response.reason_phrase, status=response.status_code, detail=response.text)
+        )
+
+
+def _part(scan: Scan) -> tuple[str, bytes, str]:
+    """A multipart file part; the service reads the type from the file name's extension."""
+    if isinstance(scan, tuple):
+        name, data = scan
+    else:
+        name, data = Path(scan).name, Path(scan).read_bytes()
+    return name, data, "application/octet-stream"
+
+
+def _params(**values: object) -> dict:
+    """Query parameters without the ``None`` ones (the service's defaults apply)."""
+    return {key: value for key, value in values.items() if value is not None}

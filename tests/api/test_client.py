@@ -1,0 +1,77 @@
+"""The Python client against the live app (in process, through a TestClient): every endpoint,
+its answers checked against the raw HTTP answers and the pipeline, and problems raised whole."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from app.client import Client, ServiceProblem
+from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
+from tests.api.conftest import API_KEY
+from tests.builders import mesh_bytes
+from tests.conftest import bumpy_patch, sphere
+
+
+@pytest.fixture(scope="module")
+def service(client):
+    return Client(http=client, api_key=API_KEY)
+
+
+@pytest.fixture(scope="module")
+def scans():
+    """Two overlapping patches of one surface, as (file name, bytes)."""
+    return [(f"patch{seed}.ply", mesh_bytes(bumpy_patch(seed=seed, n=500), "ply")) for seed in (1, 2)]
+
+
+def test_a_spectrum_is_the_pipelines(service):
+    patch = bumpy_patch(seed=1, n=500)
+    report = service.spectrum(("patch.ply", mesh_bytes(patch, "ply")), k=12)
+    expected = mesh_spectrum(patch, SpectrumOptions(k=12))
+    np.testing.assert_allclose(report.eigenvalues, expected.eigenvalues, rtol=1e-6)  # PLY stores float32
+    assert report.boundary == "dirichlet" and report.faces_dropped == 0
+
+
+def test_a_union_of_files_equals_the_union_of_their_spectra_in_either_order(service, scans):
+    by_files = service.union(files=scans)
+    spectra = [operand.eigenvalues for operand in by_files.operands]
+    by_spectra = service.union(spectra=spectra[::-1])
+    np.testing.assert_allclose(by_spectra.eigenvalues, by_files.eigenvalues, rtol=1e-6)
+    mixed = service.union(files=scans[:1], spectra=spectra[1:])
+    np.testing.assert_allclose(mixed.eigenvalues, by_files.eigenvalues, rtol=1e-6)
+    assert [o.source for o in mixed.operands] == ["files[0] patch1.ply", "spectra[0]"]
+    assert np.all(np.asarray(by_files.lower) <= by_files.eigenvalues)
+
+
+def test_localize_and_retrieve_answer_as_the_raw_endpoints_do(service, scans, client):
+    spectra = [o.eigenvalues for o in service.union(files=scans).operands]
+    region = service.localize(spectra=spectra)
+    raw = client.post("/v1/localize", data={"spectra": str(spectra)}).json()
+    assert region.vertices == raw["vertices"] and region.part_coverage == raw["part_coverage"]
+    matches = service.retrieve(spectra=spectra, top=3).matches
+    raw_matches = client.post("/v1/retrieve", data={"spectra": str(spectra)}, params={"top": 3}).json()["matches"]
+    assert [m.id for m in matches] == [m["id"] for m in raw_matches]
+
+
+def test_a_stored_shape_is_listed_retrieved_first_and_deleted(service):
+    ball = trimesh.creation.icosphere(subdivisions=3)
+    stored = service.add_shape(("ball.ply", ball.export(file_type="ply")), "ball", units="cm")
+    assert stored.label == "ball" and stored.source == "ball.ply"
+    best = service.retrieve(spectra=[stored.spectrum], top=1).matches[0]
+    assert best.id == stored.id and best.distance == pytest.approx(0.0, abs=1e-9)
+    total = service.shapes(limit=1).total
+    service.delete_shape(stored.id)
+    assert service.shapes(limit=1).total == total - 1
+    assert service.models().database.shapes == total - 1
+
+
+def test_problems_are_raised_with_their_body(service, client):
+    with pytest.raises(ServiceProblem) as bad:
+        service.union(spectra=[[3.0, 2.0, 1.0]])
+    assert bad.value.status == 422 and bad.value.type == "/problems/invalid-spectrum"
+    assert "exactly 20 eigenvalues" in bad.value.problem.detail
+    with pytest.raises(ServiceProblem) as refused:
+        Client(http=client).add_shape(("ball.ply", mesh_bytes(sphere(2), "ply")), "no key")
+    assert refused.value.status == 401 and refused.value.type == "/problems/invalid-api-key"
+    with pytest.raises(ServiceProblem) as missing:
+        service.delete_shape("not-a-shape")
+    assert missing.value.status == 404 and missing.value.type == "/problems/shape-not-found"
