@@ -9,6 +9,7 @@ from fastapi import Depends, FastAPI
 from app import __version__
 from app.api.admission import AdmissionMiddleware
 from app.api.deps import refuse_repeated_parameters
+from app.api.docs_page import install_docs_page
 from app.api.metrics import MetricsMiddleware
 from app.api.metrics import router as metrics_router
 from app.api.operands import MAX_OPERANDS
@@ -58,6 +59,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version=__version__,
         summary="Laplace–Beltrami spectra of partial deformable 3D shapes.",
         lifespan=lifespan,
+        docs_url=None,
+        redoc_url=None,
         dependencies=[Depends(refuse_repeated_parameters)],
         form_limits={"max_files": MAX_OPERANDS, "max_fields": MAX_FORM_FIELDS, "max_part_size": MAX_FORM_FIELD_BYTES},
     )
@@ -73,6 +76,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.add_middleware(MetricsMiddleware)
     install_problem_handlers(app)
+    install_docs_page(app)
     app.include_router(health.router)
     app.include_router(metrics_router)
     app.include_router(spectrum.router, prefix="/v1")

@@ -1,0 +1,36 @@
+"""``/docs``: Swagger UI from the service's own vendored files (``app/static/swagger-ui``).
+
+FastAPI's default page loads Swagger UI from a CDN and its favicon from another host, so it
+was blank without internet or behind a firewall. The page here names only paths of this
+service; the files, their version and checksums are in ``app/static/swagger-ui/VENDORED.md``.
+ReDoc is not offered: it too would come from a CDN.
+"""
+
+from pathlib import Path
+
+from fastapi import FastAPI
+from fastapi.openapi.docs import get_swagger_ui_html
+from fastapi.responses import HTMLResponse
+from fastapi.staticfiles import StaticFiles
+
+STATIC_DIR = Path(__file__).resolve().parents[1] / "static"
+STATIC_URL = "/static"
+SWAGGER_URL = f"{STATIC_URL}/swagger-ui"
+
+
+def install_docs_page(app: FastAPI) -> None:
+    """Serve the static files and the ``/docs`` page that loads them (the app is built with
+    ``docs_url=None`` so FastAPI's CDN page is not registered)."""
+    app.mount(STATIC_URL, StaticFiles(directory=STATIC_DIR), name="static")
+
+    @app.get("/docs", include_in_schema=False)
+    async def docs() -> HTMLResponse:
+        return get_swagger_ui_html(
+            openapi_url=app.openapi_url or "/openapi.json",
+            title=f"{app.title} — API",
+            swagger_js_url=f"{SWAGGER_URL}/swagger-ui-bundle.js",
+            swagger_css_url=f"{SWAGGER_URL}/swagger-ui.css",
+            swagger_favicon_url=f"{SWAGGER_URL}/favicon-32x32.png",
+            # No "valid" badge: it is an image fetched from validator.swagger.io.
+            swagger_ui_parameters={"validatorUrl": None},
+        )
