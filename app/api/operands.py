@@ -14,6 +14,7 @@ from fastapi import Request, UploadFile
 
 from app.api import form_json
 from app.api.metrics import SOLVES
+from app.api.problems import ProblemError
 from app.api.solver import SolverPool
 from app.core.config import Settings
 from app.geometry.errors import GeometryError
@@ -22,6 +23,7 @@ from app.geometry.pipeline import SpectrumOptions, SpectrumReport
 from app.inference.spectra import InvalidSpectrum, checked_spectrum
 
 MAX_OPERANDS = 32
+OPERAND_FIELDS = ("files", "spectra")  # the form fields that carry operands
 
 
 @dataclass(frozen=True)
@@ -59,6 +61,17 @@ async def solve_upload(request: Request, data: bytes, file_type: str, options: S
     return report
 
 
+async def _no_operand(request: Request) -> str:
+    """Why a request has no operand, naming the fields it sent instead (``file`` for ``files``)."""
+    form = await request.form()
+    others = sorted(set(form.keys()) - set(OPERAND_FIELDS))
+    sent = f"; it sent {', '.join(repr(name) for name in others)}, which is not one" if others else ""
+    return (
+        "no operand: send scans in the multipart field 'files' (repeated, one per scan) and/or spectra "
+        f"in the field 'spectra'{sent}"
+    )
+
+
 async def resolve_operands(
     request: Request,
     settings: Settings,
@@ -72,8 +85,15 @@ async def resolve_operands(
     given = parse_spectra(spectra, k)
     files = files or []
     count = len(files) + len(given)
-    if not 1 <= count <= MAX_OPERANDS:
-        raise InvalidSpectrum(f"expected 1 to {MAX_OPERANDS} operands (files and spectra), got {count}")
+    if count == 0:
+        raise ProblemError(422, "invalid-request", "Invalid request", await _no_operand(request))
+    if count > MAX_OPERANDS:
+        raise ProblemError(
+            422,
+            "invalid-request",
+            "Invalid request",
+            f"at most {MAX_OPERANDS} operands (files and spectra), got {count}",
+        )
     options = upload_options(settings, k, units, scale)
     operands: list[Operand] = []
     started = time.perf_counter()

@@ -129,3 +129,14 @@ def test_a_partial_surface_is_not_stored_as_a_complete_shape(client):
         headers={"X-API-Key": API_KEY},
     )
     assert response.status_code == 201, response.text
+
+
+def test_a_request_without_operands_names_the_field_it_should_have_used(client):
+    """``-F file=@a.ply`` on /v1/union sent no operand and was answered invalid-spectrum "got 0"."""
+    patch = mesh_bytes(bumpy_patch(seed=1, n=300), "ply")
+    response = client.post("/v1/union", files={"file": ("a.ply", patch)})
+    detail = assert_problem(response, 422, "invalid-request")["detail"]
+    assert "'files'" in detail and "it sent 'file'" in detail
+    assert_problem(client.post("/v1/localize"), 422, "invalid-request")
+    many = json.dumps([list(range(1, K + 1))] * 33)
+    assert "at most 32 operands" in assert_problem(_union(client, many), 422, "invalid-request")["detail"]

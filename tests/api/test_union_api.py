@@ -93,7 +93,7 @@ def test_a_file_operand_is_solved_server_side(client, template, parts):
 @pytest.mark.parametrize(
     "spectra, says",
     [
-        ([], "operands"),
+        ([], "no operand"),
         ([[1.0] * 20, [1.0] * 19], "spectra[1]"),
         ([[1.0] * 20, [-5.0] + [1.0] * 19], "negative"),
         ([[1.0] * 20, list(range(20, 0, -1))], "ascending"),
