@@ -1,6 +1,8 @@
 # The README's commands. Python >= 3.11 is taken from $(PYTHON).
 PYTHON ?= python3
 VENV ?= .venv
+HOST ?= 127.0.0.1
+PORT ?= 8000
 BIN := $(VENV)/bin
 
 .PHONY: run test test-train lint bench dataset train models
@@ -11,8 +13,8 @@ $(BIN)/.installed: pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $@
 
-run: $(BIN)/.installed  ## set up and serve on 127.0.0.1:8000
-	$(BIN)/spectral-unions serve --host 127.0.0.1 --port 8000
+run: $(BIN)/.installed  ## set up and serve on $(HOST):$(PORT) (default 127.0.0.1:8000)
+	$(BIN)/spectral-unions serve --host $(HOST) --port $(PORT)
 
 test: $(BIN)/.installed  ## set up and run the test suite
 	$(BIN)/python -m pytest -q

@@ -1,5 +1,6 @@
 """Builds the FastAPI application; ``create_app`` is the uvicorn factory."""
 
+import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
@@ -26,6 +27,8 @@ from app.core.config import Settings, get_settings
 # files without file names sends them as text fields), and the largest text field, 32 spectra of
 # 200 eigenvalues as JSON, is far below a MiB.
 MAX_FORM_FIELDS = MAX_OPERANDS + 8
+# uvicorn's own logger: its handler is the one configured when the service runs under uvicorn.
+STARTUP_LOG = logging.getLogger("uvicorn.error")
 MAX_FORM_FIELD_BYTES = 1024 * 1024
 
 
@@ -46,6 +49,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         resources = Resources(settings)
         await anyio.to_thread.run_sync(resources.open)  # what fails is reported by /readyz, not fatal
         app.state.resources = resources
+        STARTUP_LOG.info("spectral-unions %s: %s", __version__, await anyio.to_thread.run_sync(resources.summary))
         app.state.ready = True
         flip_readiness_on_exit_signals(app)
         try:

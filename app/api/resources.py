@@ -53,6 +53,21 @@ class Resources:
             raise StoreUnavailable(self.store_problem)  # answered as 503 database-unavailable
         return self._store
 
+    def summary(self) -> str:
+        """One line for the start-up log: what is served, or why it is not."""
+        if self.models is None:
+            models = f"models unavailable ({self.models_problem})"
+        else:
+            template = len(self.models.template.vertices)
+            models = f"models {self.models.version} (k = {self.models.k}, template of {template} vertices)"
+        backend = "postgresql" if self.settings.database_url else f"sqlite {self.settings.database_path}"
+        try:
+            database = f"{backend} with {self._store.count()} shapes" if self._store else None
+        except StoreUnavailable as exc:
+            database = None
+            self.store_problem = str(exc)
+        return f"{models}; database {database or f'{backend} unavailable ({self.store_problem})'}"
+
     async def problems(self) -> list[str]:
         """What keeps the service from being ready (empty when it is)."""
         found = [] if self.models is not None else [f"models: {self.models_problem}"]

@@ -73,3 +73,18 @@ def test_a_database_that_comes_back_is_used_without_a_restart(tmp_path):
         blocker.unlink()
         assert client.get("/v1/shapes").json()["total"] > 0  # opened and seeded on this request
         assert client.get("/readyz").status_code == 200
+
+
+def test_start_up_logs_what_is_served_and_what_is_not(tmp_path, models_copy, caplog):
+    caplog.set_level("INFO", logger="uvicorn.error")
+    with app_with(tmp_path) as client:
+        models = client.get("/v1/models").json()
+    line = next(r.getMessage() for r in caplog.records if r.getMessage().startswith("spectral-unions"))
+    assert f"models {models['model_version']} (k = {models['k']}, template of {models['template_vertices']}" in line
+    assert f"with {models['database']['shapes']} shapes" in line
+    caplog.clear()
+    (models_copy / "union.onnx").unlink()
+    with app_with(tmp_path, models_dir=models_copy):
+        pass
+    line = next(r.getMessage() for r in caplog.records if r.getMessage().startswith("spectral-unions"))
+    assert "models unavailable" in line and "union.onnx" in line
