@@ -41,6 +41,8 @@ def spectrum(
     except GeometryError as exc:
         typer.echo(json.dumps({"type": f"/problems/{exc.slug}", "title": exc.title, "detail": str(exc)}), err=True)
         raise typer.Exit(code=2) from exc
+    for warning in report.warnings:
+        typer.echo(f"warning: {warning}", err=True)
     typer.echo(json.dumps(dataclasses.asdict(report)))
 
 

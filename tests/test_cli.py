@@ -26,3 +26,12 @@ def test_spectrum_command_reports_bad_input(tmp_path):
     result = CliRunner().invoke(cli, ["spectrum", str(path)])
     assert result.exit_code == 2
     assert json.loads(result.stderr)["type"] == "/problems/unsupported-file-type"
+
+
+def test_spectrum_command_warns_of_a_unit_slip_on_stderr(tmp_path, patch):
+    path = tmp_path / "patch_mm.ply"
+    path.write_bytes(ascii_ply(patch.vertices * 1000, patch.faces))  # millimetres, given as metres
+    result = CliRunner().invoke(cli, ["spectrum", str(path), "--k", "6"])
+    assert result.exit_code == 0, result.output
+    assert "warning:" in result.stderr and "units=mm" in result.stderr
+    assert json.loads(result.stdout)["warnings"] == [result.stderr.removeprefix("warning: ").strip()]

@@ -1,13 +1,15 @@
 """From uploaded bytes to a spectrum report: the path shared by the API, the CLI and training."""
 
 import time
-from dataclasses import dataclass
-from typing import Literal
+from dataclasses import dataclass, field
+from typing import Annotated, Literal
 
 import numpy as np
+from pydantic import Field
 
 from app.geometry.io import load_shape, unit_scale
 from app.geometry.laplacian import Operators, mesh_operators, point_cloud_operators
+from app.geometry.plausibility import area_warnings
 from app.geometry.shapes import Mesh, PointCloud
 from app.geometry.spectrum import DEFAULT_K, eigenvalues
 from app.geometry.validate import prepare_cloud, prepare_mesh
@@ -42,6 +44,9 @@ class SpectrumReport:
     scale_to_metres: float
     assembly_ms: float
     solve_ms: float
+    warnings: Annotated[
+        list[str], Field(description="What looks wrong though it was solved, e.g. an area no human scan has (units?).")
+    ] = field(default_factory=list)
 
 
 def spectrum_from_bytes(data: bytes, file_type: str, options: SpectrumOptions) -> SpectrumReport:
@@ -106,17 +111,19 @@ def _solve(
     values = eigenvalues(operators, k, fixed)
     solved = time.perf_counter()
     n = operators.mass.shape[0]
+    area = float(operators.mass.diagonal().sum())
     return SpectrumReport(
         eigenvalues=values.tolist(),
         kind=kind,
         boundary="none" if fixed is None else "dirichlet",
         vertices=n,
         free_vertices=n if fixed is None else int(np.count_nonzero(~fixed)),
-        area_m2=float(operators.mass.diagonal().sum()),
+        area_m2=area,
         faces_dropped=faces_dropped,
         components_dropped=components_dropped,
         holes_filled=holes_filled,
         scale_to_metres=scale,
         assembly_ms=1e3 * (assembled - started),
         solve_ms=1e3 * (solved - assembled),
+        warnings=area_warnings(area, scale),
     )

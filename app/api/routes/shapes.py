@@ -48,6 +48,7 @@ class MatchOut(BaseModel):
 class RetrieveResponse(BaseModel):
     query: list[float] = Field(description="The union spectrum that was looked up.")
     matches: list[MatchOut]
+    warnings: list[str] = Field(default_factory=list, description="As in the union's answer (unit slips).")
 
 
 async def _store(request: Request) -> ShapeStore:
@@ -78,6 +79,7 @@ async def retrieve(
     return RetrieveResponse(
         query=outcome.result.eigenvalues.tolist(),
         matches=[MatchOut(id=m.record.id, label=m.record.label, distance=m.distance) for m in matches],
+        warnings=outcome.warnings,
     )
 
 

@@ -18,6 +18,7 @@ from app.api.metrics import INFERENCE
 from app.api.operands import MAX_OPERANDS, Operand, resolve_operands
 from app.api.problems import UPLOAD_PROBLEMS, problem_responses
 from app.core.config import Settings
+from app.geometry.plausibility import size_warnings
 from app.inference.models import INTERVAL_Z, SpectralModels, Union
 from app.inference.template import PART_NAMES, coloured_template
 from app.retrieval.store import StoreUnavailable
@@ -50,6 +51,11 @@ class UnionResponse(BaseModel):
     model_version: str
     solve_ms: float = Field(description="Eigen-solves of the uploaded files.")
     inference_ms: float
+    warnings: list[str] = Field(
+        default_factory=list,
+        description="What looks wrong though it was answered: an uploaded shape's implausible area, or "
+        "operands more than 10× apart in size (a unit slip?), each naming its operand.",
+    )
 
 
 class LocalizeResponse(UnionResponse):
@@ -87,6 +93,7 @@ class UnionOutcome:
     result: Union
     solve_ms: float
     inference_ms: float
+    warnings: list[str]
 
     def fields(self, models: SpectralModels) -> dict:
         """The response fields every union-based endpoint shares."""
@@ -99,6 +106,7 @@ class UnionOutcome:
             "model_version": models.version,
             "solve_ms": round(self.solve_ms, 2),
             "inference_ms": round(self.inference_ms, 2),
+            "warnings": self.warnings,
         }
 
 
@@ -118,7 +126,9 @@ async def union_of_operands(
     result = await anyio.to_thread.run_sync(models.union, values)
     seconds = time.perf_counter() - started
     INFERENCE.labels("union").observe(seconds)
-    return UnionOutcome(operands, result, solve_ms, seconds * 1e3)
+    warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]
+    warnings += size_warnings(values, [o.source for o in operands])
+    return UnionOutcome(operands, result, solve_ms, seconds * 1e3, warnings)
 
 
 @router.post("/union", response_model=UnionResponse, responses=problem_responses(*UPLOAD_PROBLEMS))

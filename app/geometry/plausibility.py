@@ -1,0 +1,41 @@
+"""Warnings for unit slips: a shape, or a set of operands, whose size no human scan has.
+
+A body in millimetres sent as metres is a valid surface, 1 386 866 m² large: its spectrum
+(~1e-6 1/m²) was answered with a 200, and the union, localization and retrieval built on it
+were meaningless. These checks do not refuse anything (a statue is not a person); they say
+what looks wrong and which unit would make it right, in the response's ``warnings``.
+"""
+
+import numpy as np
+
+from app.geometry.io import UNIT_TO_METRES
+
+PLAUSIBLE_AREA_M2 = (0.01, 10.0)  # a hand's palm to a whole body, with room either side
+MAX_SIZE_RATIO = 10.0  # between the operands of one request, in implied length
+
+
+def area_warnings(area_m2: float, scale_to_metres: float) -> list[str]:
+    """A warning when the area is outside PLAUSIBLE_AREA_M2, naming a unit that would fit."""
+    low, high = PLAUSIBLE_AREA_M2
+    if low <= area_m2 <= high:
+        return []
+    in_file_units = area_m2 / scale_to_metres**2
+    fitting = [(unit, in_file_units * factor**2) for unit, factor in UNIT_TO_METRES.items()]
+    fitting = [(unit, area) for unit, area in fitting if low <= area <= high]
+    hint = f"; read in {fitting[0][0]} it would be {fitting[0][1]:.3g} m² (units={fitting[0][0]})" if fitting else ""
+    return [f"the shape's area is {area_m2:.3g} m², outside the {low:g}–{high:g} m² of a human scan{hint}"]
+
+
+def size_warnings(spectra: list[np.ndarray], sources: list[str]) -> list[str]:
+    """A warning when two operands differ in implied size (1/√mean λ) by more than MAX_SIZE_RATIO."""
+    lengths = [1 / np.sqrt(np.mean(spectrum[spectrum > 0])) for spectrum in spectra if np.any(spectrum > 0)]
+    if len(lengths) < 2:
+        return []
+    large, small = int(np.argmax(lengths)), int(np.argmin(lengths))
+    ratio = lengths[large] / lengths[small]
+    if ratio <= MAX_SIZE_RATIO:
+        return []
+    return [
+        f"{sources[large]} is {ratio:.0f}× the size of {sources[small]}, judged by their eigenvalues: "
+        "a unit slip? (10× is cm against mm, 100× m against cm, 1000× m against mm)"
+    ]
