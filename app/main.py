@@ -10,10 +10,10 @@ from fastapi import Depends, FastAPI
 from app import __version__
 from app.api.admission import AdmissionMiddleware
 from app.api.deps import refuse_repeated_parameters
-from app.api.docs_page import install_docs_page
 from app.api.metrics import MetricsMiddleware
 from app.api.metrics import router as metrics_router
 from app.api.operands import MAX_OPERANDS
+from app.api.pages import install_pages
 from app.api.problems import install_problem_handlers
 from app.api.resources import Resources
 from app.api.routes import health, shapes, spectrum, unions
@@ -80,7 +80,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.add_middleware(MetricsMiddleware)
     install_problem_handlers(app)
-    install_docs_page(app)
+    install_pages(app)
     app.include_router(health.router)
     app.include_router(metrics_router)
     app.include_router(spectrum.router, prefix="/v1")

@@ -1,16 +1,18 @@
-"""``/docs``: Swagger UI from the service's own vendored files (``app/static/swagger-ui``).
+"""The pages the service serves itself: ``/`` (the scanning session, ``app/static/session``)
+and ``/docs`` (Swagger UI from the vendored files in ``app/static/swagger-ui``).
 
 FastAPI's default page loads Swagger UI from a CDN and its favicon from another host, so it
 was blank without internet or behind a firewall. The page here names only paths of this
 service; the files, their version and checksums are in ``app/static/swagger-ui/VENDORED.md``.
-ReDoc is not offered: it too would come from a CDN.
+ReDoc is not offered: it too would come from a CDN. The session page's three.js is vendored
+the same way (``app/static/vendor/three/VENDORED.md``).
 """
 
 from pathlib import Path
 
 from fastapi import FastAPI
 from fastapi.openapi.docs import get_swagger_ui_html
-from fastapi.responses import HTMLResponse
+from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
 STATIC_DIR = Path(__file__).resolve().parents[1] / "static"
@@ -18,10 +20,14 @@ STATIC_URL = "/static"
 SWAGGER_URL = f"{STATIC_URL}/swagger-ui"
 
 
-def install_docs_page(app: FastAPI) -> None:
-    """Serve the static files and the ``/docs`` page that loads them (the app is built with
+def install_pages(app: FastAPI) -> None:
+    """Serve the static files, the session page and the ``/docs`` page (the app is built with
     ``docs_url=None`` so FastAPI's CDN page is not registered)."""
     app.mount(STATIC_URL, StaticFiles(directory=STATIC_DIR), name="static")
+
+    @app.get("/", include_in_schema=False)
+    async def session() -> FileResponse:
+        return FileResponse(STATIC_DIR / "session" / "index.html", media_type="text/html")
 
     @app.get("/docs", include_in_schema=False)
     async def docs() -> HTMLResponse:

@@ -4,7 +4,7 @@ vendored Swagger UI files whose checksums ``VENDORED.md`` records."""
 import hashlib
 import re
 
-from app.api.docs_page import STATIC_DIR
+from app.api.pages import STATIC_DIR
 
 
 def test_the_docs_page_loads_nothing_from_another_host(client):

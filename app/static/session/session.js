@@ -1,0 +1,167 @@
+// The scanning-session page: each dropped scan is solved once by POST /v1/spectrum; after
+// that only spectra are sent. After every scan the page asks /v1/localize (JSON and the
+// coloured template as PLY) and /v1/retrieve for the union of all parts so far.
+import * as THREE from "three";
+import { OrbitControls } from "/static/vendor/three/OrbitControls.js";
+import { PLYLoader } from "/static/vendor/three/PLYLoader.js";
+
+const parts = []; // {name, eigenvalues, warnings}
+const $ = (id) => document.getElementById(id);
+const SVG = "http://www.w3.org/2000/svg";
+
+function setStatus(text, problem = false) {
+  $("status").textContent = text;
+  $("status").classList.toggle("problem", problem);
+}
+
+function spectraForm() {
+  const form = new FormData();
+  form.append("spectra", JSON.stringify(parts.map((part) => part.eigenvalues)));
+  return form;
+}
+
+async function answer(response) {
+  const body = response.headers.get("content-type")?.includes("json") ? await response.json() : null;
+  if (!response.ok) {
+    throw new Error(body ? `${body.title}: ${body.detail}` : `HTTP ${response.status}`);
+  }
+  return body;
+}
+
+async function addScan(file) {
+  setStatus(`Solving ${file.name}…`);
+  const form = new FormData();
+  form.append("file", file, file.name);
+  try {
+    const report = await answer(await fetch(`/v1/spectrum?units=${$("units").value}`, { method: "POST", body: form }));
+    parts.push({ name: file.name, eigenvalues: report.eigenvalues, warnings: report.warnings });
+    await refresh();
+  } catch (error) {
+    setStatus(`${file.name}: ${error.message}`, true);
+  }
+}
+
+async function refresh() {
+  const item = (part) => {
+    const li = document.createElement("li");
+    li.textContent = `${part.name}: λ₁ = ${part.eigenvalues[0].toFixed(3)}`;
+    for (const warning of part.warnings) {
+      const note = document.createElement("span");
+      note.className = "warning";
+      note.textContent = ` — ${warning}`;
+      li.append(note);
+    }
+    return li;
+  };
+  $("parts").replaceChildren(...parts.map(item));
+  setStatus(`Uniting ${parts.length} part${parts.length > 1 ? "s" : ""}…`);
+  const [region, ply, found] = await Promise.all([
+    fetch("/v1/localize", { method: "POST", body: spectraForm() }).then(answer),
+    fetch("/v1/localize?format=ply", { method: "POST", body: spectraForm() }).then((r) => r.arrayBuffer()),
+    fetch("/v1/retrieve?top=5", { method: "POST", body: spectraForm() }).then(answer),
+  ]);
+  plot(region);
+  showBody(ply);
+  showCoverage(region);
+  showMatches(found);
+  document.body.dataset.parts = String(parts.length); // what the browser test waits for
+  setStatus(`${parts.length} part${parts.length > 1 ? "s" : ""}; union covers ${(100 * region.area_fraction).toFixed(1)} % of the body.`);
+}
+
+function plot(union) {
+  const svg = $("plot");
+  const [width, height, left, bottom] = [520, 300, 44, 24];
+  const k = union.eigenvalues.length;
+  const top = Math.max(...union.upper, ...parts.flatMap((part) => part.eigenvalues));
+  const x = (i) => left + ((width - left - 10) * i) / (k - 1);
+  const y = (value) => height - bottom - ((height - bottom - 10) * value) / top;
+  const line = (values) => values.map((value, i) => `${x(i).toFixed(1)},${y(value).toFixed(1)}`).join(" ");
+  const shape = (tag, attributes) => {
+    const element = document.createElementNS(SVG, tag);
+    for (const [name, value] of Object.entries(attributes)) element.setAttribute(name, value);
+    return element;
+  };
+  const reversed = union.lower.map((value, i) => `${x(i).toFixed(1)},${y(value).toFixed(1)}`).reverse().join(" ");
+  svg.replaceChildren(
+    shape("line", { class: "axis", x1: left, y1: height - bottom, x2: width - 10, y2: height - bottom }),
+    shape("line", { class: "axis", x1: left, y1: 10, x2: left, y2: height - bottom }),
+    Object.assign(shape("text", { x: 4, y: 16 }), { textContent: top.toFixed(0) }),
+    Object.assign(shape("text", { x: 4, y: height - bottom }), { textContent: "0" }),
+    Object.assign(shape("text", { x: width - 60, y: height - 6 }), { textContent: `i = 1…${k}` }),
+    shape("polygon", { class: "band", points: `${line(union.upper)} ${reversed}` }),
+    ...parts.map((part) => shape("polyline", { class: "part", points: line(part.eigenvalues) })),
+    shape("polyline", { class: "union", points: line(union.eigenvalues) }),
+  );
+}
+
+const renderer = new THREE.WebGLRenderer({ canvas: $("body"), antialias: true, preserveDrawingBuffer: true });
+const scene = new THREE.Scene();
+scene.background = new THREE.Color(0xf4f4f4);
+scene.add(new THREE.HemisphereLight(0xffffff, 0x888888, 2.2));
+const light = new THREE.DirectionalLight(0xffffff, 1.2);
+light.position.set(1, 2, 3);
+scene.add(light);
+const camera = new THREE.PerspectiveCamera(35, 520 / 420, 0.01, 100);
+const controls = new OrbitControls(camera, renderer.domElement);
+controls.addEventListener("change", () => renderer.render(scene, camera));
+let mesh = null;
+
+function showBody(buffer) {
+  const geometry = new PLYLoader().parse(buffer);
+  geometry.computeVertexNormals();
+  if (mesh) {
+    scene.remove(mesh);
+    mesh.geometry.dispose();
+  } else {
+    geometry.computeBoundingSphere();
+    const { center, radius } = geometry.boundingSphere;
+    controls.target.copy(center);
+    camera.up.set(0, 0, 1); // the template body stands along +z
+    camera.position.set(center.x, center.y - 3.2 * radius, center.z);
+    controls.update();
+  }
+  mesh = new THREE.Mesh(geometry, new THREE.MeshLambertMaterial({ vertexColors: true }));
+  scene.add(mesh);
+  renderer.render(scene, camera);
+}
+
+function showCoverage(region) {
+  const entries = Object.entries(region.part_coverage);
+  const missing = entries.filter(([, share]) => share < 0.5).map(([name]) => name.replaceAll("_", " "));
+  $("missing").textContent = missing.length ? `Still missing: ${missing.join(", ")}.` : "Every body part is covered.";
+  $("coverage").replaceChildren(
+    ...entries.map(([name, share]) => {
+      const li = document.createElement("li");
+      li.dataset.part = name;
+      li.dataset.coverage = share.toFixed(4);
+      li.textContent = `${name.replaceAll("_", " ")}: ${(100 * share).toFixed(0)} %`;
+      return li;
+    }),
+  );
+}
+
+function showMatches(found) {
+  $("matches").replaceChildren(
+    ...found.matches.map((match) => {
+      const li = document.createElement("li");
+      li.textContent = `${match.label} (distance ${match.distance.toFixed(3)})`;
+      return li;
+    }),
+  );
+}
+
+$("file").addEventListener("change", async (event) => {
+  for (const file of event.target.files) await addScan(file);
+  event.target.value = "";
+});
+$("drop").addEventListener("dragover", (event) => {
+  event.preventDefault();
+  $("drop").classList.add("over");
+});
+$("drop").addEventListener("dragleave", () => $("drop").classList.remove("over"));
+$("drop").addEventListener("drop", async (event) => {
+  event.preventDefault();
+  $("drop").classList.remove("over");
+  for (const file of event.dataTransfer.files) await addScan(file);
+});
+$("reset").addEventListener("click", () => location.reload());

@@ -1,0 +1,149 @@
+"""The scanning-session page in a real headless browser (Chromium through Selenium), against a
+live server: two parts dropped one at a time, then the plot, the 3D view and the coverage list
+are what the API says. Needs ``chromium`` and ``chromium-driver`` (``.ci/run`` installs them).
+
+``SESSION_SCREENSHOT=docs/session.png`` also saves the page as it was checked (the README's
+picture is made that way).
+"""
+
+import io
+import json
+import os
+import re
+import shutil
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+
+from app.core.config import Settings
+from app.inference.template import PART_NAMES, Template
+from benchmarks.load import template_part
+from tests.api.servers import start, wait_ready
+from tests.postgres import free_port
+
+webdriver = pytest.importorskip("selenium.webdriver")
+Image = pytest.importorskip("PIL.Image")
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+DRIVER = shutil.which("chromedriver")
+pytestmark = pytest.mark.skipif(not (CHROMIUM and DRIVER), reason="needs chromium and chromedriver")
+
+# Two overlapping scans (the torso in both) that never see the right arm or the left leg.
+PARTS = {
+    "head_torso_left_arm.ply": ("head", "neck", "torso", "left_upper_arm", "left_forearm", "left_hand"),
+    "torso_hips_right_leg.ply": ("torso", "hips", "right_thigh", "right_shin", "right_foot"),
+}
+BACKGROUND = (244, 244, 244)  # the canvas's clear colour (#f4f4f4)
+
+
+@pytest.fixture(scope="module")
+def scans(tmp_path_factory) -> list[Path]:
+    folder = tmp_path_factory.mktemp("scans")
+    template = Template.load(Settings().models_dir)
+    paths = []
+    for name, kept in PARTS.items():
+        path = folder / name
+        path.write_bytes(template_part(template, tuple(part for part in PART_NAMES if part not in kept)))
+        paths.append(path)
+    return paths
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory):
+    port = free_port()
+    process = start(port, {"SPECTRAL_UNIONS_DATABASE_PATH": str(tmp_path_factory.mktemp("db") / "shapes.sqlite")})
+    try:
+        wait_ready(f"http://127.0.0.1:{port}", process)
+        yield f"http://127.0.0.1:{port}"
+    finally:
+        process.kill()
+        process.wait(timeout=30)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for argument in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-background-networking",
+        "--enable-unsafe-swiftshader",  # WebGL in software: CI machines have no GPU
+        "--use-angle=swiftshader",
+        "--window-size=1300,1100",
+    ):
+        options.add_argument(argument)
+    driver = webdriver.Chrome(service=Service(DRIVER), options=options)
+    yield driver
+    driver.quit()
+
+
+def _expected_region(base: str, scans: list[Path]) -> dict:
+    """What the API says of the same session, asked directly: each part's spectrum, then the union."""
+    spectra = [
+        httpx.post(f"{base}/v1/spectrum", files={"file": (p.name, p.read_bytes())}, timeout=60).json()["eigenvalues"]
+        for p in scans
+    ]
+    return httpx.post(f"{base}/v1/localize", data={"spectra": json.dumps(spectra)}, timeout=60).json()
+
+
+def _drawn_share(element) -> float:
+    """Share of an element's pixels that are not the background."""
+    pixels = np.asarray(Image.open(io.BytesIO(element.screenshot_as_png)).convert("RGB")).reshape(-1, 3)
+    return float(np.mean(np.abs(pixels.astype(int) - BACKGROUND).sum(axis=1) > 30))
+
+
+def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(base, scans, browser):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    browser.get(f"{base}/")
+    upload = browser.find_element(By.ID, "file")
+    for count, path in enumerate(scans, start=1):
+        upload.send_keys(str(path))
+        WebDriverWait(browser, 90).until(
+            lambda b, n=count: b.find_element(By.TAG_NAME, "body").get_attribute("data-parts") == str(n)
+        )
+    assert "problem" not in browser.find_element(By.ID, "status").get_attribute("class")
+
+    expected = _expected_region(base, scans)
+    shown = {
+        item.get_attribute("data-part"): float(item.get_attribute("data-coverage"))
+        for item in browser.find_elements(By.CSS_SELECTOR, "#coverage li")
+    }
+    assert shown.keys() == expected["part_coverage"].keys()
+    for part, share in expected["part_coverage"].items():
+        assert shown[part] == pytest.approx(share, abs=1e-4), part
+    unseen = [part.replace("_", " ") for part, share in expected["part_coverage"].items() if share < 0.5]
+    assert unseen and "torso" not in unseen  # the model's answer, which the page must show
+    assert browser.find_element(By.ID, "missing").text == f"Still missing: {', '.join(unseen)}."
+
+    plot = browser.find_element(By.ID, "plot")
+    assert len(plot.find_elements(By.CSS_SELECTOR, "polyline.part")) == len(scans)
+    assert len(plot.find_elements(By.CSS_SELECTOR, "polyline.union")) == 1
+    assert len(plot.find_elements(By.CSS_SELECTOR, "polygon.band")) == 1
+    canvas = browser.find_element(By.ID, "body")
+    assert _drawn_share(canvas) > 0.05  # the body is drawn, not a blank canvas
+    pixels = np.asarray(Image.open(io.BytesIO(canvas.screenshot_as_png)).convert("RGB")).reshape(-1, 3).astype(int)
+    reddish = (pixels[:, 0] > pixels[:, 1] + 60).mean()
+    greyish = ((np.ptp(pixels, axis=1) < 12) & (pixels[:, 0] < 225) & (pixels[:, 0] > 60)).mean()
+    assert reddish > 0.02 and greyish > 0.001  # covered and missing, in their two colours
+    assert len(browser.find_elements(By.CSS_SELECTOR, "#matches li")) == 5
+
+    if os.environ.get("SESSION_SCREENSHOT"):
+        browser.save_screenshot(os.environ["SESSION_SCREENSHOT"])
+
+
+def test_the_page_and_its_script_load_nothing_from_another_host(base):
+    page = httpx.get(f"{base}/").text
+    script = httpx.get(f"{base}/static/session/session.js").text
+    imports = json.loads(re.search(r'<script type="importmap">(.*?)</script>', page, re.DOTALL).group(1))["imports"]
+    urls = re.findall(r'(?:src|href)="([^"]+)"', page) + list(imports.values())
+    urls += [spec for spec in re.findall(r'^import .* from "([^"]+)";$', script, re.MULTILINE) if spec not in imports]
+    assert len(urls) >= 6 and all(url.startswith("/") for url in urls), urls
+    for url in urls:
+        assert httpx.get(f"{base}{url}").status_code == 200, url
