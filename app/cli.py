@@ -13,6 +13,8 @@ from app.geometry.errors import GeometryError
 from app.geometry.io import resolve_file_type
 from app.geometry.pipeline import SpectrumOptions, spectrum_from_bytes
 from app.geometry.spectrum import DEFAULT_K, MAX_K
+from app.inference.template import Template
+from app.samples import write_samples
 
 cli = typer.Typer(no_args_is_help=True, add_completion=False)
 
@@ -44,6 +46,13 @@ def spectrum(
     for warning in report.warnings:
         typer.echo(f"warning: {warning}", err=True)
     typer.echo(json.dumps(dataclasses.asdict(report)))
+
+
+@cli.command()
+def samples(folder: Annotated[Path, typer.Argument(file_okay=False, help="Where to write (made if absent).")]) -> None:
+    """Write the README's sample files into FOLDER: two partial scans, a complete body, their spectra."""
+    for path in write_samples(folder, Template.load(get_settings().models_dir)):
+        typer.echo(f"wrote {path} ({path.stat().st_size} bytes)")
 
 
 @cli.command()

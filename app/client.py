@@ -5,8 +5,8 @@ The response classes are the ones the routes declare (``app.api.routes``) and th
 report is the pipeline's dataclass, so the client cannot drift from what the service sends.
 
     with Client("http://127.0.0.1:8000") as client:
-        part = client.spectrum("no_head.ply")
-        union = client.union(files=["no_left_hand.ply"], spectra=[part.eigenvalues])
+        part = client.spectrum("no_head_neck.ply")
+        union = client.union(files=["no_left_forearm_hand.ply"], spectra=[part.eigenvalues])
 """
 
 import json

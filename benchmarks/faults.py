@@ -31,7 +31,7 @@ import trimesh
 
 from app.core.config import Settings
 from app.inference.template import Template
-from benchmarks.load import template_part
+from app.samples import template_part
 from tests.api.servers import start, wait_ready
 from tests.postgres import ThrowawayPostgres, free_port
 

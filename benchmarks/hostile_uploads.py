@@ -35,7 +35,7 @@ from scipy.spatial import Delaunay
 from app.core.config import Settings
 from app.geometry.shapes import Mesh
 from app.inference.template import Template
-from benchmarks.load import template_part
+from app.samples import template_part
 from tests.api.servers import start, wait_ready
 from tests.builders import instanced_glb, mesh_bytes
 from tests.postgres import free_port

@@ -32,17 +32,8 @@ import trimesh
 from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, spectrum_from_bytes
 from app.inference.models import SpectralModels
-from app.inference.template import PART_NAMES, Template
-
-
-def template_part(template: Template, removed: tuple[str, ...]) -> bytes:
-    """The template body without some of its parts, as PLY bytes: a partial scan with a boundary."""
-    drop = [PART_NAMES.index(name) for name in removed]
-    keep = ~np.isin(template.labels, drop)
-    faces = template.faces[keep[template.faces].all(axis=1)]
-    mesh = trimesh.Trimesh(template.vertices, faces, process=False)
-    mesh.remove_unreferenced_vertices()
-    return mesh.export(file_type="ply")
+from app.inference.template import Template
+from app.samples import PARTS, template_part
 
 
 @dataclass
@@ -133,16 +124,11 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=30.0, help="per scenario")
     parser.add_argument("--concurrency", type=int, default=8)
     parser.add_argument("--repeats", type=int, default=7, help="for the single-request breakdown")
-    parser.add_argument("--write-parts", type=Path, help="only write the two parts (PLY) into this folder")
     args = parser.parse_args()
 
     settings = Settings()
     template = Template.load(settings.models_dir)
-    parts = [template_part(template, ("head", "neck")), template_part(template, ("left_hand", "left_forearm"))]
-    if args.write_parts:
-        for name, data in zip(("no_head.ply", "no_left_arm.ply"), parts, strict=True):
-            (args.write_parts / name).write_bytes(data)
-        return
+    parts = [template_part(template, removed) for removed in PARTS.values()]
     sizes = [len(trimesh.load(trimesh.util.wrap_as_stream(p), file_type="ply").vertices) for p in parts]
     server = None if args.url else start_server(args.port)
     url = args.url or f"http://127.0.0.1:{args.port}"

@@ -30,7 +30,7 @@ import numpy as np
 
 from app.core.config import Settings
 from app.inference.template import Template
-from benchmarks.load import template_part
+from app.samples import PARTS, template_part
 from tests.api.servers import start, wait_ready
 from tests.postgres import free_port
 
@@ -153,7 +153,7 @@ def main() -> None:
     args = parser.parse_args()
 
     template = Template.load(Settings().models_dir)
-    parts = [template_part(template, ("head", "neck")), template_part(template, ("left_hand", "left_forearm"))]
+    parts = [template_part(template, removed) for removed in PARTS.values()]
     files = [("files", (f"part{i}.ply", data, "application/octet-stream")) for i, data in enumerate(parts)]
     solvers = os.cpu_count() or 1
     port = free_port()

@@ -19,7 +19,7 @@ import pytest
 
 from app.core.config import Settings
 from app.inference.template import PART_NAMES, Template
-from benchmarks.load import template_part
+from app.samples import template_part
 from tests.api.servers import start, wait_ready
 from tests.postgres import free_port
 

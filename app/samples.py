@@ -1,0 +1,53 @@
+"""The sample files the README's examples use, made from the template body the service ships.
+
+``spectral-unions samples DIR`` writes them: two partial scans (the template without some of
+its body parts, so each has a boundary), a complete body to store, and the two parts' spectra
+as the ``spectra`` field takes them. Everything is computed here, from ``models/``, so the
+examples run from a fresh clone without a download.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from app.geometry.pipeline import SpectrumOptions, spectrum_from_bytes
+from app.inference.template import PART_NAMES, Template
+
+# File name → the body parts removed from the template (what each name says is missing).
+PARTS = {
+    "no_head_neck.ply": ("head", "neck"),
+    "no_left_forearm_hand.ply": ("left_forearm", "left_hand"),
+}
+BODY_FILE, BODY_SCALE = "body.ply", 1.04  # a complete body of another size: an identity to store
+SPECTRA_FILE = "spectra.json"
+
+
+def template_part(template: Template, removed: tuple[str, ...]) -> bytes:
+    """The template body without some of its parts, as PLY bytes: a partial scan with a boundary."""
+    drop = [PART_NAMES.index(name) for name in removed]
+    keep = ~np.isin(template.labels, drop)
+    faces = template.faces[keep[template.faces].all(axis=1)]
+    mesh = trimesh.Trimesh(template.vertices, faces, process=False)
+    mesh.remove_unreferenced_vertices()
+    return mesh.export(file_type="ply")
+
+
+def write_samples(folder: Path, template: Template) -> list[Path]:
+    """Write the parts, the body and the parts' spectra into ``folder``; the paths written."""
+    folder.mkdir(parents=True, exist_ok=True)
+    written, spectra = [], []
+    for name, removed in PARTS.items():
+        data = template_part(template, removed)
+        spectra.append(spectrum_from_bytes(data, "ply", SpectrumOptions()).eigenvalues)
+        written.append(_write(folder / name, data))
+    body = trimesh.Trimesh(template.vertices * BODY_SCALE, template.faces, process=False)
+    written.append(_write(folder / BODY_FILE, body.export(file_type="ply")))
+    written.append(_write(folder / SPECTRA_FILE, json.dumps(spectra).encode()))
+    return written
+
+
+def _write(path: Path, data: bytes) -> Path:
+    path.write_bytes(data)
+    return path
