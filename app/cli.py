@@ -3,14 +3,16 @@
 import dataclasses
 import json
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, NoReturn
 
 import typer
 import uvicorn
 
+from app.api import form_json
+from app.api.problems import Problem, status_for
 from app.core.config import get_settings
 from app.geometry.errors import GeometryError
-from app.geometry.io import resolve_file_type
+from app.geometry.io import UNIT_TO_METRES, resolve_file_type
 from app.geometry.pipeline import SpectrumOptions, spectrum_from_bytes
 from app.geometry.spectrum import DEFAULT_K, MAX_K
 from app.inference.template import Template
@@ -22,30 +24,44 @@ cli = typer.Typer(no_args_is_help=True, add_completion=False)
 @cli.command()
 def spectrum(
     file: Annotated[Path, typer.Argument(exists=True, dir_okay=False, readable=True)],
-    k: Annotated[int, typer.Option(min=1, max=MAX_K)] = DEFAULT_K,
+    k: Annotated[int, typer.Option(help=f"Number of eigenvalues, 1–{MAX_K}.")] = DEFAULT_K,
     units: Annotated[str, typer.Option(help="m, cm or mm")] = "m",
     scale: Annotated[float | None, typer.Option(help="Factor to metres; overrides units.")] = None,
     closed: Annotated[bool, typer.Option(help="Point clouds: the cloud is closed.")] = False,
+    boundary: Annotated[str | None, typer.Option(help="Point clouds: JSON list of boundary point indices.")] = None,
     file_type: Annotated[str | None, typer.Option(help="Overrides the extension.")] = None,
+    pretty: Annotated[bool, typer.Option(help="Indented JSON instead of one line.")] = False,
 ) -> None:
-    """Print the spectrum of FILE as the JSON that POST /v1/spectrum returns."""
+    """Print the spectrum of FILE as the JSON that POST /v1/spectrum returns; a problem (the
+    API's type and title) on stderr and exit code 2 when it cannot."""
+    # The API's query validation, with its problem type: a bad k or unit is the request's fault.
+    if not 1 <= k <= MAX_K:
+        _fail(422, "invalid-request", "Invalid request", f"k: must lie in 1–{MAX_K}, got {k}")
+    if units not in UNIT_TO_METRES:
+        _fail(422, "invalid-request", "Invalid request", f"units: must be one of m, cm, mm, got {units!r}")
     settings = get_settings()
-    options = SpectrumOptions(
-        k=k,
-        units=units,
-        scale=scale,
-        closed=closed,
-        max_vertices=settings.max_vertices,
-        max_hole_edges=settings.max_hole_edges,
-    )
     try:
+        options = SpectrumOptions(
+            k=k,
+            units=units,
+            scale=scale,
+            closed=closed,
+            boundary_indices=form_json.boundary_indices(boundary),
+            max_vertices=settings.max_vertices,
+            max_hole_edges=settings.max_hole_edges,
+        )
         report = spectrum_from_bytes(file.read_bytes(), resolve_file_type(file.name, file_type), options)
     except GeometryError as exc:
-        typer.echo(json.dumps({"type": f"/problems/{exc.slug}", "title": exc.title, "detail": str(exc)}), err=True)
-        raise typer.Exit(code=2) from exc
+        _fail(status_for(exc), exc.slug, exc.title, str(exc))
     for warning in report.warnings:
         typer.echo(f"warning: {warning}", err=True)
-    typer.echo(json.dumps(dataclasses.asdict(report)))
+    typer.echo(json.dumps(dataclasses.asdict(report), indent=2 if pretty else None))
+
+
+def _fail(status: int, slug: str, title: str, detail: str) -> NoReturn:
+    problem = Problem(type=f"/problems/{slug}", title=title, status=status, detail=detail)
+    typer.echo(problem.model_dump_json(), err=True)
+    raise typer.Exit(code=2)
 
 
 @cli.command()

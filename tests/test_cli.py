@@ -3,11 +3,16 @@
 import json
 
 import numpy as np
+import pytest
+from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
 from app.cli import cli
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum, spectrum_from_bytes
+from app.main import create_app
+from tests.api.conftest import settings_for
 from tests.builders import ascii_ply
+from tests.conftest import sphere
 
 
 def test_spectrum_command_prints_the_report(tmp_path, patch):
@@ -54,3 +59,37 @@ def test_samples_command_writes_what_the_readme_uses(tmp_path):
     spectra = json.loads((folder / "spectra.json").read_text())
     expected = [parts[0].eigenvalues, parts[1].eigenvalues]  # no_head_neck, then no_left_forearm_hand
     np.testing.assert_allclose(spectra, expected, rtol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def api(tmp_path_factory):
+    """The service in process, to hold the CLI's answers against."""
+    with TestClient(create_app(settings_for(tmp_path_factory.mktemp("db") / "shapes.sqlite"))) as client:
+        yield client
+
+
+def test_cli_problems_carry_the_apis_problem_types(tmp_path, patch, api):
+    path = tmp_path / "patch.ply"
+    path.write_bytes(ascii_ply(patch.vertices, patch.faces))
+    for options, query in ((["--units", "inches"], {"units": "inches"}), (["--k", "500"], {"k": 500})):
+        result = CliRunner().invoke(cli, ["spectrum", str(path), *options])
+        over_http = api.post("/v1/spectrum", params=query, files={"file": ("patch.ply", path.read_bytes())})
+        assert result.exit_code == 2
+        problem = json.loads(result.stderr)
+        assert problem["type"] == over_http.json()["type"] == "/problems/invalid-request"
+        assert problem["status"] == over_http.status_code == 422
+
+
+def test_cli_takes_a_point_clouds_boundary_as_the_api_does(tmp_path, api):
+    points = sphere(subdivisions=4).vertices
+    points = points[points[:, 2] > 0]
+    indices = np.flatnonzero(points[:, 2] < 0.08).tolist()
+    path = tmp_path / "cap.xyz"
+    path.write_text("".join(f"{x} {y} {z}\n" for x, y, z in points))
+    result = CliRunner().invoke(cli, ["spectrum", str(path), "--boundary", json.dumps(indices), "--pretty"])
+    assert result.exit_code == 0, result.output
+    over_http = api.post(
+        "/v1/spectrum", files={"file": ("cap.xyz", path.read_bytes())}, data={"boundary": json.dumps(indices)}
+    ).json()
+    assert result.stdout.startswith("{\n  ")  # --pretty: indented
+    np.testing.assert_allclose(json.loads(result.stdout)["eigenvalues"], over_http["eigenvalues"], rtol=1e-12)

@@ -10,7 +10,7 @@ import json
 
 import numpy as np
 
-from app.geometry.errors import GeometryError
+from app.geometry.errors import GeometryError, InvalidGeometry
 
 MAX_INDEX = 2**31 - 1  # past any vertex cap, and within every integer type the solvers use
 
@@ -42,6 +42,13 @@ def index_list(value: object, name: str, error: type[GeometryError]) -> list[int
     if any(not 0 <= v <= MAX_INDEX for v in value):
         raise error(f"{name} must hold indices in [0, {MAX_INDEX}]")
     return value
+
+
+def boundary_indices(text: str | None) -> list[int] | None:
+    """The ``boundary`` field (a point cloud's boundary point indices), as the API and CLI take it."""
+    if text is None:
+        return None
+    return index_list(loads(text, "boundary", InvalidGeometry), "boundary", InvalidGeometry)
 
 
 def _is_number(value: object) -> bool:

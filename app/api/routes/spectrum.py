@@ -8,7 +8,6 @@ from app.api import form_json
 from app.api.deps import SettingsDep
 from app.api.operands import solve_upload
 from app.api.problems import UPLOAD_PROBLEMS, problem_responses
-from app.geometry.errors import InvalidGeometry
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
 from app.geometry.pipeline import SpectrumOptions, SpectrumReport
 from app.geometry.spectrum import DEFAULT_K, MAX_K
@@ -40,14 +39,8 @@ async def spectrum(
         units=units,
         scale=scale,
         closed=closed,
-        boundary_indices=_parse_indices(boundary),
+        boundary_indices=form_json.boundary_indices(boundary),
         max_vertices=settings.max_vertices,
         max_hole_edges=settings.max_hole_edges,
     )
     return await solve_upload(request, data, resolved_type, options)
-
-
-def _parse_indices(text: str | None) -> list[int] | None:
-    if text is None:
-        return None
-    return form_json.index_list(form_json.loads(text, "boundary", InvalidGeometry), "boundary", InvalidGeometry)
