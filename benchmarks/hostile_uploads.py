@@ -10,6 +10,8 @@ the service on a free port with its defaults (a solver worker per core), then ru
    copies of one face, 20 000 fins on one edge, a GLB of 30 000 instances, and an ASCII PLY
    that declares 3 vertices and carries 15 M more lines (30 MB). Printed: the normal client's
    p50 / p95 / max latency in both phases, and each hostile file's status and median time.
+   ``--control`` has the other clients send the normal file instead: what the same number of
+   honest clients costs the normal one.
 2. **burst**: ``--burst`` concurrent uploads of the normal file on an idle server, ``--rounds``
    times, each sent as curl sends a large body (``Expect: 100-continue``: the body follows the
    server's 100 only): how many were served and how many refused (503), and the latencies.
@@ -108,7 +110,8 @@ async def _attacker(url: str, files: dict[str, tuple[str, bytes]], stop: asyncio
 
 async def loop_scenario(url: str, body: bytes, args: argparse.Namespace) -> dict:
     alone = await _normal_client(url, body, args.alone)
-    files, stop, seen = hostile_files(), asyncio.Event(), defaultdict(list)
+    files = {"normal upload": ("part.ply", body)} if args.control else hostile_files()
+    stop, seen = asyncio.Event(), defaultdict(list)
     attackers = [asyncio.create_task(_attacker(url, files, stop, seen)) for _ in range(args.attackers)]
     await asyncio.sleep(1.0)  # the attack is under way before the normal client measures
     attacked = await _normal_client(url, body, args.attacked)
@@ -179,6 +182,9 @@ def main() -> None:
     parser.add_argument("--burst", type=int, default=64, help="concurrent uploads of the burst")
     parser.add_argument("--rounds", type=int, default=3, help="bursts, each on an idle server")
     parser.add_argument("--only", choices=["loop", "burst"], help="run one scenario only")
+    parser.add_argument(
+        "--control", action="store_true", help="loop: the other clients send the normal file instead (the baseline)"
+    )
     args = parser.parse_args()
 
     body = template_part(Template.load(Settings().models_dir), ("head", "neck"))
