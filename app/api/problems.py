@@ -51,9 +51,9 @@ def status_for(error: GeometryError) -> int:
 # Representative problems per status for the OpenAPI page: (slug, title, detail).
 EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
     400: [("invalid-form", "Invalid form data", "Too many files. Maximum number of files is 32.")],
-    401: [("invalid-api-key", "Invalid API key", "X-API-Key is missing or does not match.")],
-    403: [("writes-disabled", "Writes disabled", "No API key is configured, so /v1/shapes is read-only.")],
-    404: [("shape-not-found", "Shape not found", "No stored shape has id 3f2a….")],
+    401: [("invalid-api-key", "Invalid API key", "X-API-Key is missing or wrong")],
+    403: [("writes-disabled", "Writes disabled", "no API key is configured on this server")],
+    404: [("shape-not-found", "Shape not found", "no shape with id 3f2a9c")],
     408: [
         (
             "body-timeout",
@@ -61,11 +61,17 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
             "the request body was not complete 60 s after its headers (12288 bytes received)",
         )
     ],
-    413: [("upload-too-large", "Upload too large", "The request body exceeds 67108864 bytes.")],
-    415: [("unsupported-file-type", "Unsupported file type", "'.zip' is not an accepted type (ply, obj, …).")],
+    413: [("upload-too-large", "Upload too large", "the request body exceeds the cap of 67108864 bytes")],
+    415: [
+        (
+            "unsupported-file-type",
+            "Unsupported file type",
+            "file type 'zip' is not accepted; allowed: glb, npy, obj, off, ply, stl, txt, xyz",
+        )
+    ],
     422: [
-        ("invalid-spectrum", "Invalid spectrum", "operand 2 (spectra[1]): eigenvalues must be non-decreasing."),
-        ("invalid-geometry", "Invalid geometry", "operand 1 (files[0], scan.ply): coordinates contain NaN or inf."),
+        ("invalid-spectrum", "Invalid spectrum", "spectra[1] is not in ascending order"),
+        ("invalid-geometry", "Invalid geometry", "files[0] scan.ply: 1 vertices have NaN or infinite coordinates"),
         ("invalid-request", "Invalid request", "query.top: Input should be less than or equal to 100"),
         (
             "too-many-faces",
@@ -103,8 +109,28 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
 }
 
 
-# What any route that takes an uploaded file can answer besides its own errors.
+# What any route that takes an uploaded file can answer besides its own errors: the statuses,
+# and the documented problems among them (a route adds those of what else it needs).
 UPLOAD_PROBLEMS = (400, 408, 413, 415, 422, 503)
+UPLOAD_SLUGS = frozenset(
+    {
+        "invalid-form",
+        "body-timeout",
+        "upload-too-large",
+        "unsupported-file-type",
+        "invalid-geometry",
+        "invalid-request",
+        "too-many-faces",
+        "scene-too-large",
+        "solve-timeout",
+        "solve-memory-exceeded",
+        "overloaded",
+        "solver-crashed",
+        "upload-storage-full",
+    }
+)
+MODEL_SLUGS = frozenset({"invalid-spectrum", "models-unavailable"})  # routes that run the models
+DATABASE_SLUGS = frozenset({"database-unavailable"})  # routes that read or write the store
 
 
 def problem_responses(*statuses: int, slugs: set[str] | None = None) -> dict[int | str, dict]:

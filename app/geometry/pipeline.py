@@ -32,18 +32,23 @@ class SpectrumOptions:
 class SpectrumReport:
     """The eigenvalues and what was computed, so a client can tell what it got."""
 
-    eigenvalues: list[float]
-    kind: Literal["mesh", "points"]
-    boundary: Literal["dirichlet", "none"]
-    vertices: int
-    free_vertices: int
-    area_m2: float
-    faces_dropped: int
-    components_dropped: int
-    holes_filled: int
-    scale_to_metres: float
-    assembly_ms: float
-    solve_ms: float
+    eigenvalues: Annotated[list[float], Field(description="The first k eigenvalues, 1/m², non-decreasing.")]
+    kind: Annotated[Literal["mesh", "points"], Field(description="How the file was read: a mesh or a point cloud.")]
+    boundary: Annotated[
+        Literal["dirichlet", "none"],
+        Field(description="dirichlet: the surface has a boundary, held at zero; none: closed (λ₁ = 0)."),
+    ]
+    vertices: Annotated[int, Field(description="Vertices solved on, after cleaning.")]
+    free_vertices: Annotated[int, Field(description="Vertices off the Dirichlet boundary (the unknowns).")]
+    area_m2: Annotated[float, Field(description="Surface area in m², from the lumped mass.")]
+    faces_dropped: Annotated[int, Field(description="Repeated or degenerate faces removed before assembly.")]
+    components_dropped: Annotated[
+        int, Field(description="Connected components (point-cloud clusters) dropped: only the largest is kept.")
+    ]
+    holes_filled: Annotated[int, Field(description="Pin-holes capped before the solve (small boundary loops).")]
+    scale_to_metres: Annotated[float, Field(description="Factor applied to the file's coordinates (units or scale).")]
+    assembly_ms: Annotated[float, Field(description="Laplacian assembly time.")]
+    solve_ms: Annotated[float, Field(description="Eigen-solve time.")]
     warnings: Annotated[
         list[str], Field(description="What looks wrong though it was solved, e.g. an area no human scan has (units?).")
     ] = field(default_factory=list)

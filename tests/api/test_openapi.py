@@ -1,12 +1,17 @@
 """The OpenAPI page documents every error as the one problem+json shape, with an example, and
 the README's errors table names every problem type the service can answer."""
 
+import json
 import re
 from pathlib import Path
 
+from fastapi.testclient import TestClient
+
 from app.api.problems import EXAMPLES, FRAMEWORK_PROBLEMS
+from app.core.config import Settings
 from app.geometry.errors import GeometryError
 from app.main import create_app
+from tests.api.conftest import API_KEY
 
 
 def test_every_documented_error_is_a_problem_with_an_example():
@@ -38,3 +43,48 @@ def test_the_readme_errors_table_names_every_problem_type():
     documented = {slug for examples in EXAMPLES.values() for slug, _, _ in examples}
     framework = {slug for status, (slug, _) in FRAMEWORK_PROBLEMS.items() if status == 400}
     assert raised | documented | framework <= listed, sorted((raised | documented | framework) - listed)
+
+
+def test_every_response_field_is_described():
+    schemas = create_app().openapi()["components"]["schemas"]
+    responses = {name: schema for name, schema in schemas.items() if not name.startswith(("Body_", "HTTPValidation"))}
+    undescribed = [
+        f"{name}.{field}"
+        for name, schema in responses.items()
+        if name != "ValidationError"
+        for field, spec in schema.get("properties", {}).items()
+        if "description" not in spec
+    ]
+    assert not undescribed, undescribed
+
+
+def _reproducers() -> dict:
+    """For each documented example, a request that gets it, on an app with the default caps."""
+    nan_ply = b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+    nan_ply += b"element face 1\nproperty list uchar int vertex_indices\nend_header\nnan 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"
+    faces_ply = nan_ply.replace(b"element face 1", b"element face 900000000")
+    ascending = json.dumps([list(range(1, 21)), list(range(20, 0, -1))])
+    return {
+        "invalid-api-key": lambda c: c.delete("/v1/shapes/x", headers={"X-API-Key": "wrong"}),
+        "shape-not-found": lambda c: c.delete("/v1/shapes/3f2a9c", headers={"X-API-Key": API_KEY}),
+        "upload-too-large": lambda c: c.post("/v1/spectrum", headers={"content-length": str(2**26 + 1)}),
+        "unsupported-file-type": lambda c: c.post("/v1/spectrum", files={"file": ("scan.zip", b"PK")}),
+        "invalid-spectrum": lambda c: c.post("/v1/union", data={"spectra": ascending}),
+        "invalid-geometry": lambda c: c.post("/v1/union", files={"files": ("scan.ply", nan_ply)}),
+        "invalid-request": lambda c: c.post("/v1/retrieve", params={"top": 101}, data={"spectra": ascending}),
+        "too-many-faces": lambda c: c.post("/v1/union", files={"files": ("scan.ply", faces_ply)}),
+    }
+
+
+def test_documented_error_examples_are_the_messages_the_service_sends(tmp_path):
+    settings = Settings(database_path=tmp_path / "shapes.sqlite", api_key=API_KEY)  # the default caps
+    documented = {slug: (status, detail) for status, rows in EXAMPLES.items() for slug, _, detail in rows}
+    reproducers = _reproducers()
+    with TestClient(create_app(settings)) as client:
+        for slug, request in reproducers.items():
+            response = request(client)
+            assert (response.status_code, response.json()["detail"]) == documented[slug], slug
+    unkeyed = Settings(database_path=tmp_path / "other.sqlite")
+    with TestClient(create_app(unkeyed)) as client:
+        response = client.delete("/v1/shapes/x", headers={"X-API-Key": "any"})
+        assert (response.status_code, response.json()["detail"]) == documented["writes-disabled"]

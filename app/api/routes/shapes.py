@@ -14,7 +14,14 @@ from pydantic import BaseModel, Field
 
 from app.api.deps import SettingsDep
 from app.api.operands import solve_upload, upload_options
-from app.api.problems import UPLOAD_PROBLEMS, ProblemError, problem_responses
+from app.api.problems import (
+    DATABASE_SLUGS,
+    MODEL_SLUGS,
+    UPLOAD_PROBLEMS,
+    UPLOAD_SLUGS,
+    ProblemError,
+    problem_responses,
+)
 from app.api.routes.unions import FilesField, ScaleQuery, SpectraField, UnitsQuery, union_of_operands
 from app.geometry.errors import InvalidGeometry
 from app.geometry.io import resolve_file_type
@@ -22,32 +29,39 @@ from app.retrieval.store import ShapeStore
 
 router = APIRouter(tags=["retrieval"])
 MAX_TOP = 100
+RETRIEVE_PROBLEMS = problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS | DATABASE_SLUGS)
+ADD_PROBLEMS = problem_responses(
+    401,
+    403,
+    *UPLOAD_PROBLEMS,
+    slugs=UPLOAD_SLUGS | DATABASE_SLUGS | {"invalid-api-key", "writes-disabled", "models-unavailable"},
+)
 MAX_OFFSET = 2**31  # far past any store; beyond, SQLite's integer binding would overflow
 
 
 class ShapeOut(BaseModel):
-    id: str
+    id: str = Field(description="The stored shape's id (for DELETE /v1/shapes/{id}).")
     label: str = Field(description="Identity label.")
     source: str = Field(description="seed (the benchmark's complete shapes) or the uploaded file name.")
-    spectrum: list[float]
-    created_at: str
+    spectrum: list[float] = Field(description="Its plain (closed-surface) spectrum, 1/m².")
+    created_at: str = Field(description="When it was stored, ISO 8601 in UTC.")
 
 
 class ShapePage(BaseModel):
-    total: int
-    offset: int
-    shapes: list[ShapeOut]
+    total: int = Field(description="Shapes stored in all.")
+    offset: int = Field(description="Shapes skipped before this page.")
+    shapes: list[ShapeOut] = Field(description="This page, oldest first.")
 
 
 class MatchOut(BaseModel):
-    id: str
-    label: str
+    id: str = Field(description="The stored shape's id.")
+    label: str = Field(description="Its identity label.")
     distance: float = Field(description="ShapeDNA distance: Euclidean on log λ₂…λ_k.")
 
 
 class RetrieveResponse(BaseModel):
     query: list[float] = Field(description="The union spectrum that was looked up.")
-    matches: list[MatchOut]
+    matches: list[MatchOut] = Field(description="Nearest first.")
     warnings: list[str] = Field(default_factory=list, description="As in the union's answer (unit slips).")
 
 
@@ -63,7 +77,11 @@ def _require_key(settings, given: str | None) -> None:
         raise ProblemError(401, "invalid-api-key", "Invalid API key", "X-API-Key is missing or wrong")
 
 
-@router.post("/retrieve", response_model=RetrieveResponse, responses=problem_responses(*UPLOAD_PROBLEMS))
+@router.post(
+    "/retrieve",
+    response_model=RetrieveResponse,
+    responses=problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS | DATABASE_SLUGS),
+)
 async def retrieve(
     request: Request,
     settings: SettingsDep,
@@ -84,7 +102,10 @@ async def retrieve(
 
 
 @router.post(
-    "/shapes", response_model=ShapeOut, status_code=201, responses=problem_responses(401, 403, *UPLOAD_PROBLEMS)
+    "/shapes",
+    response_model=ShapeOut,
+    status_code=201,
+    responses=ADD_PROBLEMS,
 )
 async def add_shape(
     request: Request,

@@ -7,7 +7,7 @@ from fastapi import APIRouter, File, Form, Query, Request, UploadFile
 from app.api import form_json
 from app.api.deps import SettingsDep
 from app.api.operands import solve_upload
-from app.api.problems import UPLOAD_PROBLEMS, problem_responses
+from app.api.problems import UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
 from app.geometry.pipeline import SpectrumOptions, SpectrumReport
 from app.geometry.spectrum import DEFAULT_K, MAX_K
@@ -18,7 +18,7 @@ router = APIRouter(tags=["spectra"])
 @router.post(
     "/spectrum",
     response_model=SpectrumReport,
-    responses=problem_responses(*UPLOAD_PROBLEMS),
+    responses=problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS),
 )
 async def spectrum(
     request: Request,

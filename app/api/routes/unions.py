@@ -16,7 +16,7 @@ from pydantic import BaseModel, Field
 from app.api.deps import SettingsDep
 from app.api.metrics import INFERENCE
 from app.api.operands import MAX_OPERANDS, Operand, resolve_operands
-from app.api.problems import UPLOAD_PROBLEMS, problem_responses
+from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.core.config import Settings
 from app.geometry.plausibility import size_warnings
 from app.inference.models import INTERVAL_Z, SpectralModels, Union
@@ -24,6 +24,8 @@ from app.inference.template import PART_NAMES, coloured_template
 from app.retrieval.store import StoreUnavailable
 
 router = APIRouter(tags=["unions"])
+# What the union-based routes can answer: an upload's problems, and the models'.
+UNION_PROBLEMS = problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS)
 
 FilesField = Annotated[
     list[UploadFile] | None,
@@ -37,9 +39,12 @@ UnitsQuery = Annotated[Literal["m", "cm", "mm"], Query(description="Units of the
 ScaleQuery = Annotated[float | None, Query(gt=0, description="Factor to metres for the files; overrides units.")]
 
 
+MODEL_VERSION_FIELD = Field(description="Content hash of the ONNX models: replicas agree iff they serve the same.")
+
+
 class OperandSpectrum(BaseModel):
     source: str = Field(description="files[i] <name> or spectra[i].")
-    eigenvalues: list[float]
+    eigenvalues: list[float] = Field(description="The operand's own spectrum, 1/m²: send it back as a spectrum.")
 
 
 class UnionResponse(BaseModel):
@@ -48,9 +53,9 @@ class UnionResponse(BaseModel):
     lower: list[float] = Field(description="Lower end of the 90 % interval.")
     upper: list[float] = Field(description="Upper end of the 90 % interval.")
     operands: list[OperandSpectrum] = Field(description="Each operand's own spectrum, for caching.")
-    model_version: str
+    model_version: str = MODEL_VERSION_FIELD
     solve_ms: float = Field(description="Eigen-solves of the uploaded files.")
-    inference_ms: float
+    inference_ms: float = Field(description="The union operator's time.")
     warnings: list[str] = Field(
         default_factory=list,
         description="What looks wrong though it was answered: an uploaded shape's implausible area, or "
@@ -62,23 +67,23 @@ class LocalizeResponse(UnionResponse):
     vertices: list[int] = Field(description="Template vertices inside the region (or its mirror image).")
     area_fraction: float = Field(description="Share of the template's area covered.")
     part_coverage: dict[str, float] = Field(description="Covered share of each body part's area.")
-    template_vertices: int
+    template_vertices: int = Field(description="Vertices of the template body the indices refer to.")
 
 
 class DatabaseInfo(BaseModel):
-    backend: Literal["sqlite", "postgresql"]
+    backend: Literal["sqlite", "postgresql"] = Field(description="Which store holds the ShapeDNA database.")
     shapes: int | None = Field(description="Complete shapes stored for retrieval; null while the database is down.")
     problem: str | None = Field(None, description="Why the database cannot be used, when it cannot.")
 
 
 class ModelsResponse(BaseModel):
-    model_version: str
-    k: int
-    units: str
-    interval: str
-    template_vertices: int
-    parts: list[str]
-    database: DatabaseInfo
+    model_version: str = MODEL_VERSION_FIELD
+    k: int = Field(description="Eigenvalues per spectrum the models take and give.")
+    units: str = Field(description="What the eigenvalues are measured in.")
+    interval: str = Field(description="What lower and upper mean.")
+    template_vertices: int = Field(description="Vertices of the template body.")
+    parts: list[str] = Field(description="The body parts coverage is reported for, in order.")
+    database: DatabaseInfo = Field(description="The ShapeDNA database's backend and size.")
 
 
 def _models(request: Request) -> SpectralModels:
@@ -131,7 +136,11 @@ async def union_of_operands(
     return UnionOutcome(operands, result, solve_ms, seconds * 1e3, warnings)
 
 
-@router.post("/union", response_model=UnionResponse, responses=problem_responses(*UPLOAD_PROBLEMS))
+@router.post(
+    "/union",
+    response_model=UnionResponse,
+    responses=problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS),
+)
 async def union(
     request: Request,
     settings: SettingsDep,
@@ -152,7 +161,10 @@ async def union(
 @router.post(
     "/localize",
     response_model=LocalizeResponse,
-    responses={**problem_responses(*UPLOAD_PROBLEMS), 200: {"content": {"application/ply": {}}}},
+    responses={
+        **problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS),
+        200: {"content": {"application/ply": {}}},
+    },
 )
 async def localize(
     request: Request,
@@ -185,7 +197,7 @@ async def localize(
     )
 
 
-@router.get("/models", response_model=ModelsResponse, responses=problem_responses(503))
+@router.get("/models", response_model=ModelsResponse, responses=problem_responses(503, slugs=MODEL_SLUGS))
 async def models_info(request: Request) -> ModelsResponse:
     """What is loaded: versions, k, units, the union interval's meaning, the template, the database."""
     models, resources = _models(request), request.app.state.resources
