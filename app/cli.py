@@ -8,12 +8,12 @@ from typing import Annotated, NoReturn
 import typer
 import uvicorn
 
-from app.api import form_json
+from app.api.operands import upload_options
 from app.api.problems import Problem, status_for
 from app.core.config import get_settings
 from app.geometry.errors import GeometryError
 from app.geometry.io import UNIT_TO_METRES, resolve_file_type
-from app.geometry.pipeline import SpectrumOptions, spectrum_from_bytes
+from app.geometry.pipeline import spectrum_from_bytes
 from app.geometry.spectrum import DEFAULT_K, MAX_K
 from app.inference.template import Template
 from app.samples import write_samples
@@ -39,17 +39,8 @@ def spectrum(
         _fail(422, "invalid-request", "Invalid request", f"k: must lie in 1–{MAX_K}, got {k}")
     if units not in UNIT_TO_METRES:
         _fail(422, "invalid-request", "Invalid request", f"units: must be one of m, cm, mm, got {units!r}")
-    settings = get_settings()
     try:
-        options = SpectrumOptions(
-            k=k,
-            units=units,
-            scale=scale,
-            closed=closed,
-            boundary_indices=form_json.boundary_indices(boundary),
-            max_vertices=settings.max_vertices,
-            max_hole_edges=settings.max_hole_edges,
-        )
+        options = upload_options(get_settings(), k, units, scale, closed=closed, boundary=boundary)
         report = spectrum_from_bytes(file.read_bytes(), resolve_file_type(file.name, file_type), options)
     except GeometryError as exc:
         _fail(status_for(exc), exc.slug, exc.title, str(exc))

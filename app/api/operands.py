@@ -46,10 +46,25 @@ def parse_spectra(text: str | None, k: int) -> list[list[float]]:
     ]
 
 
-def upload_options(settings: Settings, k: int, units: Literal["m", "cm", "mm"], scale: float | None) -> SpectrumOptions:
-    """Solve options for an uploaded shape under the service's caps."""
+def upload_options(
+    settings: Settings,
+    k: int,
+    units: str,
+    scale: float | None,
+    *,
+    closed: bool = False,
+    boundary: str | None = None,
+) -> SpectrumOptions:
+    """Solve options for an uploaded shape under the service's caps (the API's and the CLI's);
+    ``boundary`` is the JSON field of a point cloud's boundary indices."""
     return SpectrumOptions(
-        k=k, units=units, scale=scale, max_vertices=settings.max_vertices, max_hole_edges=settings.max_hole_edges
+        k=k,
+        units=units,
+        scale=scale,
+        closed=closed,
+        boundary_indices=form_json.boundary_indices(boundary),
+        max_vertices=settings.max_vertices,
+        max_hole_edges=settings.max_hole_edges,
     )
 
 

@@ -4,12 +4,11 @@ from typing import Annotated, Literal
 
 from fastapi import APIRouter, File, Form, Query, Request, UploadFile
 
-from app.api import form_json
 from app.api.deps import SettingsDep
-from app.api.operands import solve_upload
+from app.api.operands import solve_upload, upload_options
 from app.api.problems import UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
-from app.geometry.pipeline import SpectrumOptions, SpectrumReport
+from app.geometry.pipeline import SpectrumReport
 from app.geometry.spectrum import DEFAULT_K, MAX_K
 
 router = APIRouter(tags=["spectra"])
@@ -34,13 +33,5 @@ async def spectrum(
     """First k Dirichlet (or, for a closed surface, plain) Laplace–Beltrami eigenvalues in 1/m²."""
     resolved_type = resolve_file_type(file.filename, file_type)
     data = await file.read()
-    options = SpectrumOptions(
-        k=k,
-        units=units,
-        scale=scale,
-        closed=closed,
-        boundary_indices=form_json.boundary_indices(boundary),
-        max_vertices=settings.max_vertices,
-        max_hole_edges=settings.max_hole_edges,
-    )
+    options = upload_options(settings, k, units, scale, closed=closed, boundary=boundary)
     return await solve_upload(request, data, resolved_type, options)
