@@ -16,6 +16,11 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
+import selenium.webdriver as webdriver
+from PIL import Image
+from selenium.webdriver.chrome.service import Service
+from selenium.webdriver.common.by import By
+from selenium.webdriver.support.ui import WebDriverWait
 
 from app.core.config import Settings
 from app.inference.template import PART_NAMES, Template
@@ -23,8 +28,6 @@ from app.samples import template_part
 from tests.api.servers import start, wait_ready
 from tests.postgres import free_port
 
-webdriver = pytest.importorskip("selenium.webdriver")
-Image = pytest.importorskip("PIL.Image")
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 DRIVER = shutil.which("chromedriver")
 pytestmark = pytest.mark.skipif(not (CHROMIUM and DRIVER), reason="needs chromium and chromedriver")
@@ -63,8 +66,6 @@ def base(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def browser():
-    from selenium.webdriver.chrome.service import Service
-
     options = webdriver.ChromeOptions()
     options.binary_location = CHROMIUM
     for argument in (
@@ -98,9 +99,6 @@ def _drawn_share(element) -> float:
 
 
 def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(base, scans, browser):
-    from selenium.webdriver.common.by import By
-    from selenium.webdriver.support.ui import WebDriverWait
-
     browser.get(f"{base}/")
     upload = browser.find_element(By.ID, "file")
     for count, path in enumerate(scans, start=1):
