@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 from fastapi.testclient import TestClient
+from pydantic import TypeAdapter
 
 from app.api.problems import EXAMPLES, FRAMEWORK_PROBLEMS
 from app.core.config import Settings
@@ -88,3 +89,24 @@ def test_documented_error_examples_are_the_messages_the_service_sends(tmp_path):
     with TestClient(create_app(unkeyed)) as client:
         response = client.delete("/v1/shapes/x", headers={"X-API-Key": "any"})
         assert (response.status_code, response.json()["detail"]) == documented["writes-disabled"]
+
+
+def test_every_json_answer_has_a_success_example_that_its_model_accepts():
+    from app.api.routes.shapes import RetrieveResponse, ShapeOut, ShapePage
+    from app.api.routes.unions import LocalizeResponse, ModelsResponse, UnionResponse
+    from app.geometry.pipeline import SpectrumReport
+
+    models = {
+        ("post", "/v1/spectrum", "200"): SpectrumReport,
+        ("post", "/v1/union", "200"): UnionResponse,
+        ("post", "/v1/localize", "200"): LocalizeResponse,
+        ("post", "/v1/retrieve", "200"): RetrieveResponse,
+        ("post", "/v1/shapes", "201"): ShapeOut,
+        ("get", "/v1/shapes", "200"): ShapePage,
+        ("get", "/v1/models", "200"): ModelsResponse,
+    }
+    paths = create_app().openapi()["paths"]
+    for (method, path, status), model in models.items():
+        example = paths[path][method]["responses"][status]["content"]["application/json"]["example"]
+        TypeAdapter(model).validate_python(example, strict=False)
+        assert set(example) == set(TypeAdapter(model).json_schema()["properties"]), path

@@ -13,6 +13,7 @@ from fastapi import APIRouter, File, Form, Header, Path, Query, Request, Respons
 from pydantic import BaseModel, Field
 
 from app.api.deps import SettingsDep
+from app.api.examples import success
 from app.api.operands import solve_upload, upload_options
 from app.api.problems import (
     DATABASE_SLUGS,
@@ -29,8 +30,10 @@ from app.retrieval.store import ShapeStore
 
 router = APIRouter(tags=["retrieval"])
 MAX_TOP = 100
-RETRIEVE_PROBLEMS = problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS | DATABASE_SLUGS)
-ADD_PROBLEMS = problem_responses(
+RETRIEVE_RESPONSES = success("retrieve") | problem_responses(
+    *UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS | DATABASE_SLUGS
+)
+ADD_RESPONSES = success("add_shape", 201) | problem_responses(
     401,
     403,
     *UPLOAD_PROBLEMS,
@@ -80,7 +83,7 @@ def _require_key(settings, given: str | None) -> None:
 @router.post(
     "/retrieve",
     response_model=RetrieveResponse,
-    responses=problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS | DATABASE_SLUGS),
+    responses=RETRIEVE_RESPONSES,
 )
 async def retrieve(
     request: Request,
@@ -105,7 +108,7 @@ async def retrieve(
     "/shapes",
     response_model=ShapeOut,
     status_code=201,
-    responses=ADD_PROBLEMS,
+    responses=ADD_RESPONSES,
 )
 async def add_shape(
     request: Request,
@@ -131,7 +134,11 @@ async def add_shape(
     return ShapeOut(**record.__dict__)
 
 
-@router.get("/shapes", response_model=ShapePage, responses=problem_responses(422, slugs={"invalid-request"}))
+@router.get(
+    "/shapes",
+    response_model=ShapePage,
+    responses={**problem_responses(422, slugs={"invalid-request"}), **success("list_shapes")},
+)
 async def list_shapes(
     request: Request,
     offset: Annotated[int, Query(ge=0, le=MAX_OFFSET, description="Shapes to skip.")] = 0,

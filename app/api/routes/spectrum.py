@@ -5,6 +5,7 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, File, Form, Query, Request, UploadFile
 
 from app.api.deps import SettingsDep
+from app.api.examples import success
 from app.api.operands import solve_upload, upload_options
 from app.api.problems import UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
@@ -17,7 +18,7 @@ router = APIRouter(tags=["spectra"])
 @router.post(
     "/spectrum",
     response_model=SpectrumReport,
-    responses=problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS),
+    responses={**problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS), **success("spectrum")},
 )
 async def spectrum(
     request: Request,

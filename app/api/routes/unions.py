@@ -14,6 +14,7 @@ from fastapi import APIRouter, File, Form, Query, Request, Response, UploadFile
 from pydantic import BaseModel, Field
 
 from app.api.deps import SettingsDep
+from app.api.examples import success
 from app.api.metrics import INFERENCE
 from app.api.operands import MAX_OPERANDS, Operand, resolve_operands
 from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
@@ -139,7 +140,7 @@ async def union_of_operands(
 @router.post(
     "/union",
     response_model=UnionResponse,
-    responses=problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS),
+    responses={**UNION_PROBLEMS, **success("union")},
 )
 async def union(
     request: Request,
@@ -162,8 +163,8 @@ async def union(
     "/localize",
     response_model=LocalizeResponse,
     responses={
-        **problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS),
-        200: {"content": {"application/ply": {}}},
+        **UNION_PROBLEMS,
+        200: {"content": {"application/ply": {}, **success("localize")[200]["content"]}},
     },
 )
 async def localize(
@@ -197,7 +198,11 @@ async def localize(
     )
 
 
-@router.get("/models", response_model=ModelsResponse, responses=problem_responses(503, slugs=MODEL_SLUGS))
+@router.get(
+    "/models",
+    response_model=ModelsResponse,
+    responses={**problem_responses(503, slugs=MODEL_SLUGS), **success("models")},
+)
 async def models_info(request: Request) -> ModelsResponse:
     """What is loaded: versions, k, units, the union interval's meaning, the template, the database."""
     models, resources = _models(request), request.app.state.resources

@@ -1,0 +1,23 @@
+"""Success examples for the OpenAPI page: answers recorded from the README's samples.
+
+``examples.json`` holds what the service answered for ``spectral-unions samples`` (the two
+parts, the body) on this repository's models, numbers rounded to three decimals and the
+localized vertex list cut to five; ``tests/api/test_openapi.py`` validates each against the
+response model its route declares, so an example cannot drift from the schema unnoticed.
+"""
+
+import json
+from functools import cache
+from pathlib import Path
+
+EXAMPLES_FILE = Path(__file__).with_name("examples.json")
+
+
+@cache
+def _recorded() -> dict[str, dict]:
+    return json.loads(EXAMPLES_FILE.read_text())
+
+
+def success(name: str, status: int = 200) -> dict[int | str, dict]:
+    """An OpenAPI ``responses=`` entry: the JSON example of route ``name``'s success."""
+    return {status: {"content": {"application/json": {"example": _recorded()[name]}}}}
