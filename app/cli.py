@@ -13,7 +13,7 @@ from app.api.problems import Problem, status_for
 from app.core.config import get_settings
 from app.geometry.errors import GeometryError
 from app.geometry.io import UNIT_TO_METRES, resolve_file_type
-from app.geometry.pipeline import spectrum_from_bytes
+from app.geometry.pipeline import solve_bytes
 from app.geometry.spectrum import DEFAULT_K, MAX_K
 from app.inference.template import Template
 from app.samples import write_samples
@@ -31,6 +31,10 @@ def spectrum(
     boundary: Annotated[str | None, typer.Option(help="Point clouds: JSON list of boundary point indices.")] = None,
     file_type: Annotated[str | None, typer.Option(help="Overrides the extension.")] = None,
     pretty: Annotated[bool, typer.Option(help="Indented JSON instead of one line.")] = False,
+    vectors: Annotated[
+        Path | None,
+        typer.Option(dir_okay=False, help="Also write the eigenfunctions here, as vectors=true gives them."),
+    ] = None,
 ) -> None:
     """Print the spectrum of FILE as the JSON that POST /v1/spectrum returns; a problem (the
     API's type and title) on stderr and exit code 2 when it cannot."""
@@ -41,12 +45,14 @@ def spectrum(
         _fail(422, "invalid-request", "Invalid request", f"units: must be one of m, cm, mm, got {units!r}")
     try:
         options = upload_options(get_settings(), k, units, scale, closed=closed, boundary=boundary)
-        report = spectrum_from_bytes(file.read_bytes(), resolve_file_type(file.name, file_type), options)
+        solved = solve_bytes(file.read_bytes(), resolve_file_type(file.name, file_type), options, vectors=bool(vectors))
     except GeometryError as exc:
         _fail(status_for(exc), exc.slug, exc.title, str(exc))
-    for warning in report.warnings:
+    if vectors:
+        vectors.write_bytes(solved.npz())
+    for warning in solved.report.warnings:
         typer.echo(f"warning: {warning}", err=True)
-    typer.echo(json.dumps(dataclasses.asdict(report), indent=2 if pretty else None))
+    typer.echo(json.dumps(dataclasses.asdict(solved.report), indent=2 if pretty else None))
 
 
 def _fail(status: int, slug: str, title: str, detail: str) -> NoReturn:

@@ -30,7 +30,7 @@ from threadpoolctl import threadpool_limits
 
 from app.api.problems import ProblemError
 from app.geometry.errors import SolveMemoryExceeded, SolveTimeout
-from app.geometry.pipeline import SpectrumOptions, SpectrumReport, spectrum_from_bytes
+from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport, solve_bytes
 
 RETRY_AFTER_SECONDS = 1  # a solve takes ~0.1–0.3 s: a place frees within a second
 _PRELOADED = ["app.geometry.pipeline"]
@@ -64,7 +64,7 @@ def _map_blas_buffers() -> None:
     blas.dgemm(1.0, square, square)
 
 
-def _solve_task(data: bytes, file_type: str, options: SpectrumOptions) -> SpectrumReport:
+def _solve_task(data: bytes, file_type: str, options: SpectrumOptions, vectors: bool) -> Solved:
     """The worker's task: a solve, with a memory failure answered without its traceback.
 
     A ``MemoryError``'s traceback holds the frames of the failed solve, and with them every
@@ -75,7 +75,7 @@ def _solve_task(data: bytes, file_type: str, options: SpectrumOptions) -> Spectr
     has let the old one go, so the worker is back at its idle size when it answers.
     """
     try:
-        return spectrum_from_bytes(data, file_type, options)
+        return solve_bytes(data, file_type, options, vectors=vectors)
     except MemoryError:
         pass
     gc.collect()
@@ -112,8 +112,14 @@ class SolverPool:
 
     async def solve(self, data: bytes, file_type: str, options: SpectrumOptions) -> SpectrumReport:
         """The spectrum of one upload, or the error that says why not; see the module docstring."""
+        return (await self.solve_with_functions(data, file_type, options, vectors=False)).report
+
+    async def solve_with_functions(
+        self, data: bytes, file_type: str, options: SpectrumOptions, *, vectors: bool = True
+    ) -> Solved:
+        """The solve with (``vectors``) its eigenfunctions and their vertices' provenance."""
         async with self.limiter:
-            task = (data, file_type, options)
+            task = (data, file_type, options, vectors)
             future = self._pool.schedule(_solve_task, args=task, timeout=self.timeout_s)
             try:
                 return await asyncio.wrap_future(future)

@@ -1,18 +1,23 @@
 """From uploaded bytes to a spectrum report: the path shared by the API, the CLI and training."""
 
+import io
+import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field
 
+from app.geometry.errors import InvalidGeometry
 from app.geometry.io import load_shape, unit_scale
 from app.geometry.laplacian import Operators, mesh_operators, point_cloud_operators
 from app.geometry.plausibility import area_warnings
 from app.geometry.shapes import Mesh, PointCloud
-from app.geometry.spectrum import DEFAULT_K, eigenvalues
+from app.geometry.spectrum import DEFAULT_K, eigenpairs
 from app.geometry.validate import prepare_cloud, prepare_mesh
+
+MAX_FUNCTION_VALUES = 5_000_000  # vertices × k of an eigenfunction answer: 40 MB of float64
 
 
 @dataclass(frozen=True)
@@ -56,15 +61,59 @@ class SpectrumReport:
 
 def spectrum_from_bytes(data: bytes, file_type: str, options: SpectrumOptions) -> SpectrumReport:
     """Parse, validate and solve; raises a ``GeometryError`` subclass for any bad input."""
+    return solve_bytes(data, file_type, options, vectors=False).report
+
+
+@dataclass(frozen=True)
+class Solved:
+    """A solve's report, and with ``vectors`` its eigenfunctions on the vertices it solved on."""
+
+    report: SpectrumReport
+    functions: np.ndarray | None  # (vertices, k), M-orthonormal, 0 on Dirichlet boundary vertices
+    sources: np.ndarray  # (vertices,): index in the uploaded vertex list, -1 for a pin-hole's centre
+
+    def npz(self) -> bytes:
+        """The eigenfunctions as the API and the CLI hand them out: an ``.npz`` of NPY arrays
+        ``eigenvalues`` (k,), ``eigenfunctions`` (vertices, k), ``vertex_indices`` (vertices,)
+        and ``report`` (the JSON report, as a string), readable with ``allow_pickle=False``."""
+        buffer = io.BytesIO()
+        np.savez(
+            buffer,
+            eigenvalues=np.asarray(self.report.eigenvalues),
+            eigenfunctions=self.functions,
+            vertex_indices=self.sources,
+            report=np.array(json.dumps(asdict(self.report))),
+        )
+        return buffer.getvalue()
+
+
+def solve_bytes(data: bytes, file_type: str, options: SpectrumOptions, *, vectors: bool) -> Solved:
+    """Parse, validate and solve, with or without the eigenfunctions (whose size, vertices × k,
+    is bounded by MAX_FUNCTION_VALUES: the answer is as large as that)."""
     scale = unit_scale(options.units, options.scale)
     shape = load_shape(data, file_type, scale=scale, max_vertices=options.max_vertices)
+    count = len(shape.vertices) if isinstance(shape, Mesh) else len(shape.points)
+    if vectors and count * options.k > MAX_FUNCTION_VALUES:
+        raise InvalidGeometry(
+            f"eigenfunctions of {count} vertices × k = {options.k} exceed {MAX_FUNCTION_VALUES} values "
+            "(40 MB): ask for fewer eigenvalues"
+        )
     if isinstance(shape, Mesh):
-        return mesh_spectrum(shape, options, scale)
-    return cloud_spectrum(shape, options, scale)
+        return _solve_mesh(shape, options, scale, vectors)
+    return _solve_cloud(shape, options, scale, vectors)
 
 
 def mesh_spectrum(mesh: Mesh, options: SpectrumOptions, scale: float = 1.0) -> SpectrumReport:
     """Spectrum of a mesh in metres: Dirichlet if it has a boundary after pin-hole filling."""
+    return _solve_mesh(mesh, options, scale, vectors=False).report
+
+
+def cloud_spectrum(cloud: PointCloud, options: SpectrumOptions, scale: float = 1.0) -> SpectrumReport:
+    """Spectrum of a point cloud in metres: plain if declared closed, else Dirichlet on its flags."""
+    return _solve_cloud(cloud, options, scale, vectors=False).report
+
+
+def _solve_mesh(mesh: Mesh, options: SpectrumOptions, scale: float, vectors: bool) -> Solved:
     prepared = prepare_mesh(mesh, k=options.k, max_hole_edges=options.max_hole_edges)
     started = time.perf_counter()
     operators = mesh_operators(prepared.mesh.vertices, prepared.mesh.faces)
@@ -74,6 +123,8 @@ def mesh_spectrum(mesh: Mesh, options: SpectrumOptions, scale: float = 1.0) -> S
         prepared.boundary if has_boundary else None,
         options.k,
         started,
+        vectors=vectors,
+        sources=prepared.sources,
         kind="mesh",
         faces_dropped=prepared.faces_dropped,
         components_dropped=prepared.components_dropped,
@@ -82,8 +133,7 @@ def mesh_spectrum(mesh: Mesh, options: SpectrumOptions, scale: float = 1.0) -> S
     )
 
 
-def cloud_spectrum(cloud: PointCloud, options: SpectrumOptions, scale: float = 1.0) -> SpectrumReport:
-    """Spectrum of a point cloud in metres: plain if declared closed, else Dirichlet on its flags."""
+def _solve_cloud(cloud: PointCloud, options: SpectrumOptions, scale: float, vectors: bool) -> Solved:
     prepared = prepare_cloud(cloud, k=options.k, closed=options.closed, boundary_indices=options.boundary_indices)
     started = time.perf_counter()
     operators = point_cloud_operators(prepared.cloud.points)
@@ -92,6 +142,8 @@ def cloud_spectrum(cloud: PointCloud, options: SpectrumOptions, scale: float = 1
         prepared.boundary,
         options.k,
         started,
+        vectors=vectors,
+        sources=prepared.sources,
         kind="points",
         faces_dropped=0,
         components_dropped=prepared.components_dropped,
@@ -106,18 +158,20 @@ def _solve(
     k: int,
     started: float,
     *,
+    vectors: bool,
+    sources: np.ndarray,
     kind: Literal["mesh", "points"],
     faces_dropped: int,
     components_dropped: int,
     holes_filled: int,
     scale: float,
-) -> SpectrumReport:
+) -> Solved:
     assembled = time.perf_counter()
-    values = eigenvalues(operators, k, fixed)
+    values, free_functions = eigenpairs(operators, k, fixed, vectors=vectors)
     solved = time.perf_counter()
     n = operators.mass.shape[0]
     area = float(operators.mass.diagonal().sum())
-    return SpectrumReport(
+    report = SpectrumReport(
         eigenvalues=values.tolist(),
         kind=kind,
         boundary="none" if fixed is None else "dirichlet",
@@ -132,3 +186,8 @@ def _solve(
         solve_ms=1e3 * (solved - assembled),
         warnings=area_warnings(area, scale),
     )
+    functions = None
+    if free_functions is not None:
+        functions = np.zeros((n, k))
+        functions[slice(None) if fixed is None else ~fixed] = free_functions
+    return Solved(report, functions, sources)

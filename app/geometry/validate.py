@@ -47,6 +47,7 @@ class PreparedMesh:
     faces_dropped: int
     components_dropped: int
     holes_filled: int
+    sources: np.ndarray  # per vertex: its index in the uploaded vertex list, -1 for a pin-hole's centre
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,7 @@ class PreparedCloud:
     cloud: PointCloud
     boundary: np.ndarray | None
     components_dropped: int
+    sources: np.ndarray  # per point: its index in the uploaded point list
 
 
 def require_scan_coordinates(points: np.ndarray) -> None:
@@ -88,7 +90,7 @@ def prepare_mesh(mesh: Mesh, *, k: int, max_hole_edges: int) -> PreparedMesh:
     vertices, faces = mesh.vertices, mesh.faces
     require_scan_coordinates(vertices)
     _require_valid_faces(faces, len(vertices))
-    vertices, faces = _merge_duplicate_vertices(vertices, faces)
+    vertices, faces, sources = _merge_duplicate_vertices(vertices, faces)
     given = len(faces)
     faces = _distinct_faces(
         faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])]
@@ -98,15 +100,19 @@ def prepare_mesh(mesh: Mesh, *, k: int, max_hole_edges: int) -> PreparedMesh:
     if face_areas(vertices, faces).sum() <= 1e-12 * _extent(vertices) ** 2:
         raise InvalidGeometry("the faces have zero total area")
     faces, dropped = largest_component(vertices, faces)
+    referenced = np.zeros(len(vertices), dtype=bool)
+    referenced[faces.reshape(-1)] = True
+    sources = sources[referenced]  # what drop_unreferenced keeps, in its order
     vertices, faces = drop_unreferenced(vertices, faces)
     half = half_edges(faces)
     counts = edge_face_counts(half)
     _require_surface_edges(counts)
     edges = half[counts == 1]
     vertices, faces, filled = fill_small_holes(vertices, faces, edges, max_hole_edges)
+    sources = np.r_[sources, np.full(len(vertices) - len(sources), -1)]
     boundary = vertices_of(boundary_half_edges(faces) if filled else edges, len(vertices))
     _require_room_for(k, int(np.count_nonzero(~boundary)))
-    return PreparedMesh(Mesh(vertices, faces), boundary, given - len(faces), dropped, filled)
+    return PreparedMesh(Mesh(vertices, faces), boundary, given - len(faces), dropped, filled, sources)
 
 
 def prepare_cloud(cloud: PointCloud, *, k: int, closed: bool, boundary_indices: list[int] | None) -> PreparedCloud:
@@ -123,7 +129,7 @@ def prepare_cloud(cloud: PointCloud, *, k: int, closed: bool, boundary_indices: 
     if boundary_indices is not None:
         flags = _mask_from_indices(boundary_indices, len(cloud.points))[first]
     keep, dropped = _largest_cluster(points)
-    points, flags = points[keep], None if flags is None else flags[keep]
+    points, flags, sources = points[keep], None if flags is None else flags[keep], first[keep]
     if closed:
         flags = None
     elif flags is None or not flags.any():
@@ -133,7 +139,7 @@ def prepare_cloud(cloud: PointCloud, *, k: int, closed: bool, boundary_indices: 
         )
     free = len(points) if flags is None else int(np.count_nonzero(~flags))
     _require_room_for(k, free)
-    return PreparedCloud(PointCloud(points, flags), flags, dropped)
+    return PreparedCloud(PointCloud(points, flags), flags, dropped, sources)
 
 
 def _largest_cluster(points: np.ndarray) -> tuple[np.ndarray, int]:
@@ -175,8 +181,9 @@ def _require_valid_faces(faces: np.ndarray, n_vertices: int) -> None:
         raise InvalidGeometry(f"face indices must lie in [0, {n_vertices - 1}], found {faces.min()}..{faces.max()}")
 
 
-def _merge_duplicate_vertices(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Merge vertices with identical coordinates (STL stores every triangle on its own).
+def _merge_duplicate_vertices(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Merge vertices with identical coordinates (STL stores every triangle on its own); also
+    returns, per kept vertex, the index of the uploaded vertex it stands for.
 
     A lexicographic sort finds the duplicates; a mesh without any (the usual case) comes back
     as it was, in its own vertex order, without paying for np.unique over rows (5x slower).
@@ -185,10 +192,10 @@ def _merge_duplicate_vertices(vertices: np.ndarray, faces: np.ndarray) -> tuple[
     ordered = vertices[order]
     repeats = np.r_[False, np.all(ordered[1:] == ordered[:-1], axis=1)]
     if not repeats.any():
-        return vertices, faces
+        return vertices, faces, np.arange(len(vertices))
     label = np.empty(len(vertices), dtype=np.int64)
     label[order] = np.cumsum(~repeats) - 1
-    return ordered[~repeats], label[faces]
+    return ordered[~repeats], label[faces], order[~repeats]
 
 
 def _require_surface_edges(counts: np.ndarray) -> None:

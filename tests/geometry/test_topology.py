@@ -42,7 +42,7 @@ def test_drop_unreferenced_keeps_every_face_on_its_coordinates():
 def test_a_clean_mesh_comes_back_as_it_was(clean):
     """No unused and no duplicate vertex: the same arrays, in their own vertex order."""
     sphere = trimesh.creation.icosphere(subdivisions=1)
-    vertices, faces = clean(sphere.vertices, sphere.faces)
+    vertices, faces = clean(sphere.vertices, sphere.faces)[:2]
     assert vertices is sphere.vertices and faces is sphere.faces
 
 
@@ -54,9 +54,10 @@ def test_duplicate_vertices_merge_without_moving_any_face():
     position = np.empty_like(order)
     position[order] = np.arange(len(order))
     vertices, faces = soup[order], position[np.arange(len(soup)).reshape(-1, 3)]
-    merged, merged_faces = _merge_duplicate_vertices(vertices, faces)
+    merged, merged_faces, sources = _merge_duplicate_vertices(vertices, faces)
     assert len(merged) == len(sphere.vertices)
     np.testing.assert_array_equal(merged[merged_faces], vertices[faces])
+    np.testing.assert_array_equal(vertices[sources], merged)  # each kept vertex names an uploaded one
 
 
 def test_largest_component_is_by_area_and_one_component_is_returned_whole():

@@ -2,23 +2,27 @@
 
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, File, Form, Query, Request, UploadFile
+from fastapi import APIRouter, File, Form, Query, Request, Response, UploadFile
 
 from app.api.deps import SettingsDep
 from app.api.examples import success
-from app.api.operands import solve_upload, upload_options
+from app.api.operands import solve_upload, solve_upload_with_functions, upload_options
 from app.api.problems import UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
 from app.geometry.pipeline import SpectrumReport
 from app.geometry.spectrum import DEFAULT_K, MAX_K
 
 router = APIRouter(tags=["spectra"])
+NPZ_MEDIA_TYPE = "application/x-npz"  # numpy's zip of NPY arrays; np.load reads it
 
 
 @router.post(
     "/spectrum",
     response_model=SpectrumReport,
-    responses={**problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS), **success("spectrum")},
+    responses={
+        **problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS),
+        200: {"content": {NPZ_MEDIA_TYPE: {}, **success("spectrum")[200]["content"]}},
+    },
 )
 async def spectrum(
     request: Request,
@@ -30,9 +34,25 @@ async def spectrum(
     closed: Annotated[bool, Query(description="Point clouds only: the cloud is a closed surface.")] = False,
     file_type: Annotated[str | None, Query(description="Overrides the upload's extension.")] = None,
     boundary: Annotated[str | None, Form(description="Point clouds: JSON list of boundary point indices.")] = None,
-) -> SpectrumReport:
+    vectors: Annotated[
+        bool,
+        Query(
+            description="Also the eigenfunctions: the answer is then an .npz of NPY arrays eigenvalues (k,), "
+            "eigenfunctions (vertices, k; M-orthonormal, 0 on Dirichlet vertices), vertex_indices (vertices,; "
+            "each solved vertex's index in the uploaded file, -1 for a filled pin-hole's centre) and report "
+            "(this JSON answer, as a string). At most 5 000 000 values (vertices × k)."
+        ),
+    ] = False,
+) -> SpectrumReport | Response:
     """First k Dirichlet (or, for a closed surface, plain) Laplace–Beltrami eigenvalues in 1/m²."""
     resolved_type = resolve_file_type(file.filename, file_type)
     data = await file.read()
     options = upload_options(settings, k, units, scale, closed=closed, boundary=boundary)
-    return await solve_upload(request, data, resolved_type, options)
+    if not vectors:
+        return await solve_upload(request, data, resolved_type, options)
+    solved = await solve_upload_with_functions(request, data, resolved_type, options)
+    return Response(
+        solved.npz(),
+        media_type=NPZ_MEDIA_TYPE,
+        headers={"content-disposition": "attachment; filename=eigenfunctions.npz"},
+    )
