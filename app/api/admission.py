@@ -29,10 +29,11 @@ class AdmissionMiddleware:
         self.bytes = 0
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http" or not _is_multipart(scope):
+        headers = dict(scope["headers"]) if scope["type"] == "http" else {}
+        if not headers.get(b"content-type", b"").lower().startswith(b"multipart/form-data"):
             await self.app(scope, receive, send)
             return
-        charge = _declared_length(scope, self.max_body_bytes)
+        charge = _declared_length(headers, self.max_body_bytes)
         # No await between the check and the count: concurrent requests cannot all slip past.
         if self.requests >= self.capacity or self.bytes + charge > self.byte_budget:
             await self._refuse(scope, receive, send)
@@ -61,13 +62,8 @@ class AdmissionMiddleware:
         await response(scope, receive, send)
 
 
-def _is_multipart(scope: Scope) -> bool:
-    content_type = dict(scope["headers"]).get(b"content-type", b"")
-    return content_type.lower().startswith(b"multipart/form-data")
-
-
-def _declared_length(scope: Scope, max_body_bytes: int) -> int:
+def _declared_length(headers: dict[bytes, bytes], max_body_bytes: int) -> int:
     """The body length the headers declare; the cap when they declare none (chunked) or garbage
     (the upload limit refuses those with 413 before any byte is read)."""
-    declared = dict(scope["headers"]).get(b"content-length", b"")
+    declared = headers.get(b"content-length", b"")
     return min(int(declared), max_body_bytes) if declared.isdigit() else max_body_bytes

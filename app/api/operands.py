@@ -13,13 +13,12 @@ from typing import Literal
 from fastapi import Request, UploadFile
 
 from app.api import form_json
-from app.api.metrics import SOLVES
 from app.api.problems import ProblemError
 from app.api.solver import SolverPool
 from app.core.config import Settings
 from app.geometry.errors import GeometryError
 from app.geometry.io import resolve_file_type
-from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport
+from app.geometry.pipeline import SpectrumOptions, SpectrumReport
 from app.inference.spectra import InvalidSpectrum, checked_spectrum
 
 MAX_OPERANDS = 32
@@ -70,17 +69,8 @@ def upload_options(
 
 async def solve_upload(request: Request, data: bytes, file_type: str, options: SpectrumOptions) -> SpectrumReport:
     """One uploaded shape's spectrum, from the service's solver workers (bounded, with a deadline)."""
-    return (await solve_upload_with_functions(request, data, file_type, options, vectors=False)).report
-
-
-async def solve_upload_with_functions(
-    request: Request, data: bytes, file_type: str, options: SpectrumOptions, *, vectors: bool = True
-) -> Solved:
-    """As :func:`solve_upload`, with (``vectors``) the eigenfunctions and their vertices' provenance."""
     solver: SolverPool = request.app.state.solver
-    solved = await solver.solve_with_functions(data, file_type, options, vectors=vectors)
-    SOLVES.observe((solved.report.assembly_ms + solved.report.solve_ms) / 1e3)
-    return solved
+    return await solver.solve(data, file_type, options)
 
 
 async def _no_operand(request: Request) -> str:

@@ -61,12 +61,13 @@ class Resources:
             template = len(self.models.template.vertices)
             models = f"models {self.models.version} (k = {self.models.k}, template of {template} vertices)"
         backend = "postgresql" if self.settings.database_url else f"sqlite {self.settings.database_path}"
+        problem = self.store_problem
         try:
-            database = f"{backend} with {self._store.count()} shapes" if self._store else None
+            shapes = self._store.count() if self._store else None
         except StoreUnavailable as exc:
-            database = None
-            self.store_problem = str(exc)
-        return f"{models}; database {database or f'{backend} unavailable ({self.store_problem})'}"
+            shapes, problem = None, str(exc)
+        database = f"{backend} with {shapes} shapes" if shapes is not None else f"{backend} unavailable ({problem})"
+        return f"{models}; database {database}"
 
     async def problems(self) -> list[str]:
         """What keeps the service from being ready (empty when it is)."""

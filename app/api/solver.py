@@ -28,6 +28,7 @@ from pebble import ProcessExpired, ProcessPool
 from scipy.linalg import blas
 from threadpoolctl import threadpool_limits
 
+from app.api.metrics import SOLVES
 from app.api.problems import ProblemError
 from app.geometry.errors import SolveMemoryExceeded, SolveTimeout
 from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport, solve_bytes
@@ -122,7 +123,7 @@ class SolverPool:
             task = (data, file_type, options, vectors)
             future = self._pool.schedule(_solve_task, args=task, timeout=self.timeout_s)
             try:
-                return await asyncio.wrap_future(future)
+                solved: Solved = await asyncio.wrap_future(future)
             except TimeoutError as exc:
                 raise SolveTimeout(f"the solve did not finish within {self.timeout_s:g} s") from exc
             except ProcessExpired as exc:
@@ -133,3 +134,5 @@ class SolverPool:
                     f"the solver process stopped while solving this shape ({exc}); retry.",
                     headers={"Retry-After": str(RETRY_AFTER_SECONDS)},
                 ) from exc
+        SOLVES.observe((solved.report.assembly_ms + solved.report.solve_ms) / 1e3)
+        return solved

@@ -45,6 +45,15 @@ def max_faces(max_vertices: int) -> int:
     return FACES_PER_VERTEX * max_vertices
 
 
+def require_within_caps(vertices: int, faces: int, max_vertices: int, what: str) -> None:
+    """Refuse ``vertices`` over the cap or ``faces`` over the face cap; ``what`` says whose
+    counts they are ("the PLY header declares", "the scene's instances hold")."""
+    if vertices > max_vertices:
+        raise TooManyVertices(f"{what} {vertices} vertices; the cap is {max_vertices}")
+    if faces > max_faces(max_vertices):
+        raise TooManyFaces(f"{what} {faces} faces; the cap is {max_faces(max_vertices)}")
+
+
 def check_declared(data: bytes, file_type: str, max_vertices: int) -> None:
     """Refuse a file whose declared or actual size exceeds the caps, or whose body is not what
     its header declares, before it is parsed; see the module docstring."""
@@ -58,7 +67,7 @@ def check_declared(data: bytes, file_type: str, max_vertices: int) -> None:
     elif file_type == "glb":
         _check_glb(data)
     elif file_type in ("xyz", "txt"):
-        _check_line_budget(data, max_vertices, "points")
+        _check_line_budget(data, max_vertices)
 
 
 def parse_ply_header(data: bytes) -> PlyHeader:
@@ -81,11 +90,7 @@ def parse_ply_header(data: bytes) -> PlyHeader:
 def _check_ply(data: bytes, max_vertices: int) -> None:
     header = parse_ply_header(data)
     counts = dict(header.elements)
-    vertices, faces = counts.get("vertex", 0), counts.get("face", 0)
-    if vertices > max_vertices:
-        raise TooManyVertices(f"the PLY header declares {vertices} vertices; the cap is {max_vertices}")
-    if faces > max_faces(max_vertices):
-        raise TooManyFaces(f"the PLY header declares {faces} faces; the cap is {max_faces(max_vertices)}")
+    require_within_caps(counts.get("vertex", 0), counts.get("face", 0), max_vertices, "the PLY header declares")
     if header.ascii:
         _check_ascii_ply_body(data[header.body_start :], header.elements)
 
@@ -133,10 +138,7 @@ def _check_off(data: bytes, max_vertices: int) -> None:
     if counts is None:
         raise UnreadableFile("not an OFF file: no OFF keyword followed by vertex, face and edge counts")
     vertices, faces = int(counts.group(1)), int(counts.group(2))
-    if vertices > max_vertices:
-        raise TooManyVertices(f"the OFF header declares {vertices} vertices; the cap is {max_vertices}")
-    if faces > max_faces(max_vertices):
-        raise TooManyFaces(f"the OFF header declares {faces} faces; the cap is {max_faces(max_vertices)}")
+    require_within_caps(vertices, faces, max_vertices, "the OFF header declares")
     _data_lines(data[counts.end() :], vertices + faces, "the OFF header declares")
 
 
@@ -154,8 +156,8 @@ def _check_glb(data: bytes) -> None:
         raise SceneTooLarge(f"the GLB scene has {len(nodes)} nodes; at most {MAX_SCENE_NODES} are accepted")
 
 
-def _check_line_budget(data: bytes, max_vertices: int, what: str) -> None:
+def _check_line_budget(data: bytes, max_vertices: int) -> None:
     """A text point cloud holds one point per line: more lines than the cap is too many points."""
     lines = data.count(b"\n")
     if lines > max_vertices + SPARE_LINES:
-        raise TooManyVertices(f"the file holds {lines} lines, more {what} than the cap of {max_vertices}")
+        raise TooManyVertices(f"the file holds {lines} lines, more points than the cap of {max_vertices}")

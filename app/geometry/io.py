@@ -15,12 +15,10 @@ import numpy as np
 import trimesh
 from trimesh.resolvers import Resolver
 
-from app.geometry.declared import check_declared, max_faces
+from app.geometry.declared import check_declared, require_within_caps
 from app.geometry.errors import (
     GeometryError,
     InvalidGeometry,
-    TooManyFaces,
-    TooManyVertices,
     UnreadableFile,
     UnsupportedFileType,
 )
@@ -123,11 +121,9 @@ def load_shape(data: bytes, file_type: str, *, scale: float = 1.0, max_vertices:
 
 
 def _require_within_caps(shape: Shape, max_vertices: int) -> None:
-    count = len(shape.vertices) if isinstance(shape, Mesh) else len(shape.points)
-    if count > max_vertices:
-        raise TooManyVertices(f"{count} vertices exceed the cap of {max_vertices}")
-    if isinstance(shape, Mesh) and len(shape.faces) > max_faces(max_vertices):
-        raise TooManyFaces(f"{len(shape.faces)} faces exceed the cap of {max_faces(max_vertices)}")
+    vertices = len(shape.vertices) if isinstance(shape, Mesh) else len(shape.points)
+    faces = len(shape.faces) if isinstance(shape, Mesh) else 0
+    require_within_caps(vertices, faces, max_vertices, "the shape holds")
 
 
 def _scaled(shape: Shape, scale: float) -> Shape:
@@ -184,10 +180,7 @@ def _require_instances_within_caps(scene: trimesh.Scene, max_vertices: int) -> N
         geometry = scene.geometry.get(name)
         vertices += len(nodes) * len(getattr(geometry, "vertices", ()))
         faces += len(nodes) * len(getattr(geometry, "faces", ()))
-    if vertices > max_vertices:
-        raise TooManyVertices(f"the scene's instances hold {vertices} vertices; the cap is {max_vertices}")
-    if faces > max_faces(max_vertices):
-        raise TooManyFaces(f"the scene's instances hold {faces} faces; the cap is {max_faces(max_vertices)}")
+    require_within_caps(vertices, faces, max_vertices, "the scene's instances hold")
 
 
 def _external_reference_in(exc: BaseException) -> ExternalReference | None:

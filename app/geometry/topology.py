@@ -69,10 +69,16 @@ def largest_component(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarr
     return faces[face_labels == keep], len(present) - 1
 
 
+def referenced(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """True for the vertices some face uses: the ones :func:`drop_unreferenced` keeps, in order."""
+    used = np.zeros(n_vertices, dtype=bool)
+    used[faces.reshape(-1)] = True
+    return used
+
+
 def drop_unreferenced(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Remove vertices no face uses (they would give empty rows in the mass matrix)."""
-    used = np.zeros(len(vertices), dtype=bool)
-    used[faces.reshape(-1)] = True
+    used = referenced(faces, len(vertices))
     if used.all():
         return vertices, faces
     return vertices[used], (np.cumsum(used) - 1)[faces]

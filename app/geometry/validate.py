@@ -22,6 +22,7 @@ from app.geometry.topology import (
     fill_small_holes,
     half_edges,
     largest_component,
+    referenced,
     vertices_of,
 )
 
@@ -100,9 +101,7 @@ def prepare_mesh(mesh: Mesh, *, k: int, max_hole_edges: int) -> PreparedMesh:
     if face_areas(vertices, faces).sum() <= 1e-12 * _extent(vertices) ** 2:
         raise InvalidGeometry("the faces have zero total area")
     faces, dropped = largest_component(vertices, faces)
-    referenced = np.zeros(len(vertices), dtype=bool)
-    referenced[faces.reshape(-1)] = True
-    sources = sources[referenced]  # what drop_unreferenced keeps, in its order
+    sources = sources[referenced(faces, len(vertices))]
     vertices, faces = drop_unreferenced(vertices, faces)
     half = half_edges(faces)
     counts = edge_face_counts(half)

@@ -6,7 +6,7 @@ from fastapi import APIRouter, File, Form, Query, Request, Response, UploadFile
 
 from app.api.deps import SettingsDep
 from app.api.examples import success
-from app.api.operands import solve_upload, solve_upload_with_functions, upload_options
+from app.api.operands import solve_upload, upload_options
 from app.api.problems import UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
 from app.geometry.pipeline import SpectrumReport
@@ -50,7 +50,7 @@ async def spectrum(
     options = upload_options(settings, k, units, scale, closed=closed, boundary=boundary)
     if not vectors:
         return await solve_upload(request, data, resolved_type, options)
-    solved = await solve_upload_with_functions(request, data, resolved_type, options)
+    solved = await request.app.state.solver.solve_with_functions(data, resolved_type, options)
     return Response(
         solved.npz(),
         media_type=NPZ_MEDIA_TYPE,
