@@ -35,7 +35,9 @@ def build_dataset_command(
 
 DataOption = Annotated[Path, typer.Option(help="A built data set directory.")]
 ModelsOption = Annotated[Path, typer.Option(help="Where the ONNX models, metrics and card go.")]
-PresetOption = Annotated[str, typer.Option(help="Training preset: tiny, standard, standard-prior, standard-deepsets.")]
+PresetOption = Annotated[
+    str, typer.Option(help="Training preset: tiny, standard, standard-squared, standard-prior, standard-deepsets.")
+]
 
 
 @cli.command("train")

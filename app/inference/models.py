@@ -1,9 +1,9 @@
 """The ONNX models the service runs: the union operator and the region localizer.
 
 Loaded once at start-up (onnxruntime, CPU, no torch), after their checksums are verified.
-Input and output names, k and the template size are read from the graphs and checked against
-each other and the template, so a mismatched set of artefacts is found at start-up, not on
-the first request.
+Input and output names are the contract's (:mod:`app.contract`, which the exporter writes by);
+k and the template size are read from the graphs and checked against each other and the
+template, so a mismatched set of artefacts is found at start-up, not on the first request.
 """
 
 import hashlib
@@ -13,14 +13,11 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 
+from app.contract import INTERVAL_Z, LOCALIZER_FILE, LOCALIZER_INPUTS, MASK_THRESHOLD, UNION_FILE, union_feeds
 from app.geometry.laplacian import mesh_operators
 from app.inference.manifest import verify_manifest
 from app.inference.spectra import InvalidSpectrum
 from app.inference.template import PART_NAMES, Template
-
-UNION_FILE, LOCALIZER_FILE = "union.onnx", "localizer.onnx"
-INTERVAL_Z = 1.6449  # the union's sigma is calibrated so that ± z·sigma covers 90 %
-MASK_THRESHOLD = 0.5
 
 
 @dataclass(frozen=True)
@@ -55,6 +52,19 @@ def _require_finite(*outputs: np.ndarray) -> None:
         raise InvalidSpectrum("the models cannot represent these spectra: their output is not finite")
 
 
+def chained_sigma(inner: np.ndarray, inner_sigma: np.ndarray, union: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """σ of a union whose first operand was itself a predicted union (σ ``inner_sigma``).
+
+    The operator's own σ is for exact operands; an inner union is off by its own error, which
+    moves the next union with it (where nothing is added the union *is* the inner union). So the
+    inner union's relative σ is carried to the new union and added to the step's σ as an
+    independent error. Without it a session's σ was the last step's alone, and the 90 % interval
+    held 41–77 % of the truths of chains of 5–3 camera views. Arrays of the same shape, 1/m².
+    """
+    relative = inner_sigma / np.maximum(np.abs(inner), np.maximum(inner_sigma, 1e-12))  # ≤ 1, finite at λ = 0
+    return np.sqrt(sigma**2 + (relative * union) ** 2)
+
+
 def _session(path: Path, threads: int) -> ort.InferenceSession:
     options = ort.SessionOptions()
     options.intra_op_num_threads = threads
@@ -82,18 +92,19 @@ class SpectralModels:
         self.version = digest.hexdigest()[:12]  # content hash: two replicas agree iff they serve the same models
 
     def union(self, spectra: list[np.ndarray]) -> Union:
-        """Union of the spectra, folded left to right: ((A ∪ B) ∪ C) ∪ …, as trained; one is returned as is."""
-        current, sigma = spectra[0], np.zeros(self.k, np.float32)
+        """Union of the spectra, folded left to right: ((A ∪ B) ∪ C) ∪ …, as trained; one is
+        returned as is. σ carries each inner union's uncertainty on (:func:`chained_sigma`)."""
+        current, sigma = spectra[0].astype(np.float64), np.zeros(self.k)
         for other in spectra[1:]:
-            feeds = {"spectrum_a": current[None].astype(np.float32), "spectrum_b": other[None].astype(np.float32)}
-            union, sigma = self.union_session.run(None, feeds)
-            current, sigma = union[0], sigma[0]
+            union, step_sigma = self.union_session.run(None, union_feeds(current[None], other[None]))
+            sigma = chained_sigma(current, sigma, union[0].astype(np.float64), step_sigma[0].astype(np.float64))
+            current = union[0].astype(np.float64)
         _require_finite(current, sigma)
-        return Union(current.astype(np.float64), sigma.astype(np.float64))
+        return Union(current, sigma)
 
     def localize(self, spectrum: np.ndarray) -> Region:
         """The template region whose spectrum this is (up to left/right: spectra cannot tell)."""
-        (probability,) = self.localizer_session.run(None, {"spectrum": spectrum[None].astype(np.float32)})
+        (probability,) = self.localizer_session.run(None, {LOCALIZER_INPUTS[0]: spectrum[None].astype(np.float32)})
         _require_finite(probability)
         inside = probability[0] >= MASK_THRESHOLD
         area = self.vertex_area

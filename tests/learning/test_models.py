@@ -107,6 +107,28 @@ def test_a_monotone_union_is_never_above_either_part_whatever_its_weights(correc
         assert (union <= torch.minimum(a, b) * (1 + 1e-5)).all()
 
 
+@pytest.mark.parametrize("correction", CORRECTIONS)
+def test_a_part_united_with_itself_is_itself_whatever_its_weights(correction):
+    """Idempotence by construction: the coincidence gate is exactly 0 for one spectrum twice,
+    so U(A, A) = A with random weights and a memory that knows nothing of A; two different
+    parts get the full decrease the network proposes, and a pair 1 % apart stays below both."""
+    a = spectra(64, 30)
+    for seed in range(3):
+        model = operator(correction, seed)
+        for name, parameter in model.correction.named_parameters():
+            if "weight" in name and parameter.dim() > 1:
+                torch.nn.init.normal_(parameter, std=0.5)
+        with torch.no_grad():
+            union, _ = model(a, a)
+            near = model(a, a * (1 + 0.01 * torch.randn(a.shape, generator=torch.Generator().manual_seed(seed))))
+            scale = common_scale(a, a)
+            za = relative_log(a, scale)
+            gates = model.coincidence(za, za), model.coincidence(za, relative_log(spectra(64, 31), scale))
+        torch.testing.assert_close(union, a, rtol=1e-5, atol=1e-5)
+        assert (gates[0] == 0).all() and (gates[1] > 0.99).all()
+        assert (near[0] <= torch.minimum(a, a) * (1 + 1e-5)).all()
+
+
 @pytest.mark.parametrize("parametrization", PARAMETRIZATIONS)
 @pytest.mark.parametrize("correction", CORRECTIONS)
 def test_union_is_exactly_commutative_and_non_decreasing(correction, parametrization):

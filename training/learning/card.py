@@ -83,15 +83,16 @@ def localization_table(metrics: dict) -> list[str]:
 
 def extra_table(metrics: dict) -> list[str]:
     chains, floor = metrics["chains"], metrics["noise_floor"]
-    lines = ["| case | n | method | mse | mae | mre |", "|---|---|---|---|---|---|"]
+    lines = ["| case | n | method | mse | mae | mre | 90 % coverage |", "|---|---|---|---|---|---|---|"]
     for name, errors in chains.get("union", {}).items():
+        covered = _pct(chains["interval_coverage"]) if name == "operator" and "interval_coverage" in chains else "—"
         lines.append(
             f"| chain (A∪B)∪C | {chains['rows']} | {name} | {errors['mse']:.2f} | {errors['mae']:.2f} | "
-            f"{_pct(errors['mre'])} |"
+            f"{_pct(errors['mre'])} | {covered} |"
         )
     lines.append(
         f"| pose noise floor | {floor['rows']} | same region, other pose | {floor['mse']:.2f} | {floor['mae']:.2f} | "
-        f"{_pct(floor['mre'])} |"
+        f"{_pct(floor['mre'])} | — |"
     )
     return lines
 

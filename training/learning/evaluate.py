@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from app.contract import INTERVAL_Z, LOCALIZER_FILE, LOCALIZER_INPUTS, MASK_THRESHOLD, UNION_FILE, union_feeds
+from app.inference.models import chained_sigma
 from training.data.overlaps import CAMERA
 from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION
 from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
@@ -20,7 +22,7 @@ from training.learning.data import PairTable, SpectralData
 from training.learning.localizer_net import Localizer
 from training.learning.masks import symmetric_scores
 from training.learning.train_localizer import localize
-from training.learning.train_union import INTERVAL_Z, predict
+from training.learning.train_union import predict
 from training.learning.union_net import UnionOperator
 
 GROUPS = ("known_man", "unknown_man", "unknown_woman", "known_woman", "child")
@@ -113,21 +115,17 @@ def served_predictors(models: Path, batch: int = 1024) -> tuple[UnionPredictor, 
     model (this one or an earlier one) scores on a data set it was not evaluated on."""
     from training.learning.export import session
 
-    union_graph, localizer_graph = session(models / "union.onnx"), session(models / "localizer.onnx")
+    union_graph, localizer_graph = session(models / UNION_FILE), session(models / LOCALIZER_FILE)
 
     def union(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         outputs = [
-            union_graph.run(
-                None,
-                {"spectrum_a": a[i : i + batch].astype(np.float32), "spectrum_b": b[i : i + batch].astype(np.float32)},
-            )
-            for i in range(0, len(a), batch)
+            union_graph.run(None, union_feeds(a[i : i + batch], b[i : i + batch])) for i in range(0, len(a), batch)
         ]
         return tuple(np.concatenate([o[j] for o in outputs]) for j in range(2))  # type: ignore[return-value]
 
     def region(spectra: np.ndarray) -> np.ndarray:
-        (probability,) = localizer_graph.run(None, {"spectrum": spectra.astype(np.float32)})
-        return probability >= 0.5
+        (probability,) = localizer_graph.run(None, {LOCALIZER_INPUTS[0]: spectra.astype(np.float32)})
+        return probability >= MASK_THRESHOLD
 
     return union, {"all": region}
 
@@ -214,7 +212,9 @@ class Evaluator:
         sigma = np.zeros_like(views[:, 0])
         for length in range(2, views.shape[1] + 1):
             step = views[:, length - 1]
-            current["operator"], sigma = self.union(current["operator"], step)
+            union, step_sigma = self.union(current["operator"], step)
+            sigma = chained_sigma(current["operator"], sigma, union, step_sigma)
+            current["operator"] = union
             current["lookup"] = self.lookup.predict(current["lookup"], step)
             if length < 3:
                 continue
@@ -237,13 +237,19 @@ class Evaluator:
         a, b, c, _, abc = (s[triples.test] for s in triples.spectra)
         if not len(a):
             return {"rows": 0}
-        inner = self.union(a, b)[0]
+        inner, inner_sigma = self.union(a, b)
+        outer, outer_sigma = self.union(inner, c)
         chained = {
-            "operator": self.union(inner, c)[0],
+            "operator": outer,
             "elementwise_min": np.minimum(np.minimum(a, b), c),
             "lookup": self.lookup.predict(self.lookup.predict(a, b), c),
         }
-        return {"rows": int(len(a)), "union": {name: spectral_errors(p, abc) for name, p in chained.items()}}
+        sigma = chained_sigma(inner, inner_sigma, outer, outer_sigma)
+        return {
+            "rows": int(len(a)),
+            "union": {name: spectral_errors(p, abc) for name, p in chained.items()},
+            "interval_coverage": float(np.mean(np.abs(outer - abc) <= INTERVAL_Z * sigma)),
+        }
 
     def noise_floor(self) -> dict:
         """One test union region of one identity, in its own pose and another: the spread poses cause."""

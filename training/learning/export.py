@@ -1,7 +1,7 @@
 """ONNX export of the trained models, with the parity checks the service relies on.
 
-Both graphs have a dynamic batch dimension and a fixed opset; the service (onnxruntime, no
-torch) reads their input and output names from here, documented in the model card.
+Both graphs have a dynamic batch dimension and a fixed opset, and the input and output names
+of :mod:`app.contract`, by which the service (onnxruntime, no torch) feeds and reads them.
 """
 
 from pathlib import Path
@@ -10,14 +10,11 @@ import numpy as np
 import onnxruntime as ort
 import torch
 
+from app.contract import LOCALIZER_INPUTS, LOCALIZER_OUTPUTS, UNION_INPUTS, UNION_OUTPUTS, union_feeds
 from training.learning.localizer_net import Localizer
 from training.learning.union_net import UnionOperator
 
 OPSET = 18
-UNION_INPUTS = ("spectrum_a", "spectrum_b")
-UNION_OUTPUTS = ("union", "sigma")
-LOCALIZER_INPUTS = ("spectrum",)
-LOCALIZER_OUTPUTS = ("probability",)
 
 
 def _export(model: torch.nn.Module, example: tuple[torch.Tensor, ...], path: Path, inputs, outputs) -> None:
@@ -57,14 +54,14 @@ def union_parity(model: UnionOperator, path: Path, a: np.ndarray, b: np.ndarray)
     """Largest relative difference between onnxruntime and PyTorch on these operands."""
     with torch.no_grad():
         expected = model.eval()(torch.as_tensor(a), torch.as_tensor(b))
-    got = session(path).run(None, {"spectrum_a": a.astype(np.float32), "spectrum_b": b.astype(np.float32)})
+    got = session(path).run(None, union_feeds(a, b))
     return max(_relative(g, e.numpy()) for g, e in zip(got, expected, strict=True))
 
 
 def localizer_parity(model: Localizer, path: Path, spectra: np.ndarray) -> float:
     with torch.no_grad():
         expected = model.eval()(torch.as_tensor(spectra)).numpy()
-    (got,) = session(path).run(None, {"spectrum": spectra.astype(np.float32)})
+    (got,) = session(path).run(None, {LOCALIZER_INPUTS[0]: spectra.astype(np.float32)})
     return _relative(got, expected)
 
 

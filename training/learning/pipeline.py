@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.contract import LOCALIZER_FILE, UNION_FILE
 from app.inference.manifest import write_manifest
 from app.retrieval.seed import SEED_FILE
 from training.learning.baselines import elementwise_min, larger_part
@@ -27,8 +28,6 @@ from training.learning.shapedna import complete_shapes, retrieval_table, save_se
 from training.learning.train_localizer import LocalizerTraining, train_localizer
 from training.learning.train_union import UnionTraining, predict, train_union
 from training.learning.union_net import PRIOR, UnionConfig
-
-UNION_FILE, LOCALIZER_FILE = "union.onnx", "localizer.onnx"
 
 
 @dataclass(frozen=True)
@@ -45,6 +44,11 @@ TRAINING_PRESETS = {
     # best epoch was the 8th of 24 before the overlap rows came: 16 epochs, one cosine cycle.
     "standard": TrainingPreset(
         UnionTraining(epochs=16, batch=64, learning_rate=1e-3, first_restart=16, dropout=0.0),
+        LocalizerTraining(epochs=8, batch=128, first_restart=8),
+    ),
+    # The comparison of losses: the squared error of z (the mean of the plausible unions) as before.
+    "standard-squared": TrainingPreset(
+        UnionTraining(epochs=16, batch=64, learning_rate=1e-3, first_restart=16, dropout=0.0, loss="squared"),
         LocalizerTraining(epochs=8, batch=128, first_restart=8),
     ),
     # The comparison of parametrizations: the corrected prior as before, no bound by construction.

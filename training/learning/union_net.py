@@ -28,6 +28,7 @@ scale-equivariant, as the true union is (a body scaled by c has every eigenvalue
 included, scaled by 1/c²). The output is sorted, so it is non-decreasing by construction.
 """
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -37,6 +38,9 @@ from torch import Tensor, nn
 EPSILON = 1e-3  # keeps the zero λ₁ of a closed (full-body) union finite in log space
 SIGMA_FLOOR = 1e-2  # the smallest relative σ (the pose noise floor is ~2 %)
 SHARPNESS = 20.0  # of the softplus that turns the monotone parametrization's signal into a decrease
+# The coincidence gate's starting width τ in z (RMS over the spectrum): a re-scan of one region
+# differs by ~1–2 % (the pose noise floor), two different parts by tens of per cent. Learned.
+GATE_WIDTH = 0.03
 PRIOR, MONOTONE = "prior", "monotone"  # the parametrizations of the union (UnionConfig.parametrization)
 
 
@@ -46,6 +50,7 @@ class UnionConfig:
     neighbours: int = 4
     correction: str = "transformer"  # a key of CORRECTIONS
     parametrization: str = MONOTONE  # PRIOR: the prior corrected; MONOTONE: a decrease from min(a, b)
+    coincidence_gate: bool = True  # MONOTONE only: the decrease scaled by how far apart the operands are
     width: int = 256  # DeepSets hidden width
     embedding: int = 32  # transformer token width
     heads: int = 8
@@ -204,6 +209,8 @@ class UnionOperator(nn.Module):
         self.config = config
         self.memory = memory
         self.correction = CORRECTIONS[config.correction](config)
+        if config.coincidence_gate:
+            self.log_gate_width = nn.Parameter(torch.tensor(math.log(GATE_WIDTH)))
         # Interval calibration weights, fitted on validation data after training.
         self.register_buffer("sigma_scale", torch.ones(()))
         self.register_buffer("sigma_decrease", torch.zeros(()))
@@ -220,24 +227,44 @@ class UnionOperator(nn.Module):
         transferred = floor[:, None] - (floors - priors)
         change = self.correction(za, zb, torch.cat([priors, transferred], dim=1), distances)
         if self.config.parametrization == MONOTONE:
-            z, decrease = self.decreased(floor, priors[:, 0] + change)
+            z, decrease = self.decreased(floor, priors[:, 0] + change, self.coincidence(za, zb))
         else:
             z, decrease = priors[:, 0] + change, torch.zeros_like(change)
         union = torch.sort(torch.relu(torch.exp(z) - EPSILON), dim=-1).values
         return union * scale, self.sigma(union, transferred, decrease) * scale
 
+    def coincidence(self, za: Tensor, zb: Tensor) -> Tensor:
+        """(B, 1): how far apart the operands are, 0 when their spectra are one, near 1 when
+        they are as different as two parts' spectra usually are: 1 − exp(−msd / τ²), with msd
+        the mean squared difference of their z and τ learned.
+
+        A part united with itself adds nothing whatever the memory or the correction say, so
+        the decrease is scaled by this gate: U(A, A) = A exactly, and a re-scan of the same region
+        (spectra ~1–2 % apart) gets only a small share of the decrease the network proposes. It
+        reads nothing but the two operands, so it holds on bodies and regions the memory never
+        saw. Symmetric bit for bit ((a − b)² = (b − a)² in IEEE arithmetic) and scale-free (z is
+        in the pair's common scale). The price: two different parts whose spectra coincide (a
+        region and its mirror image) are united as one, which no spectrum-only operator can tell
+        apart. Without the gate (``coincidence_gate=False``), 1.
+        """
+        if not self.config.coincidence_gate:
+            return torch.ones_like(za[:, :1])
+        msd = (za - zb).pow(2).mean(-1, keepdim=True)
+        return 1 - torch.exp(-msd * torch.exp(-2 * self.log_gate_width))
+
     @staticmethod
-    def decreased(floor: Tensor, proposal: Tensor) -> tuple[Tensor, Tensor]:
+    def decreased(floor: Tensor, proposal: Tensor, gate: Tensor) -> tuple[Tensor, Tensor]:
         """z of the union as a non-negative decrease from the operands' elementwise minimum.
 
         A Dirichlet eigenvalue only falls as the domain grows, so λ(A ∪ B) ≤ min(λ(A), λ(B)),
         with equality when nothing is added (A ∪ A, or A inside B). The decrease is a smooth
-        positive part of how far the corrected prior lies below the minimum: "nothing added" is
-        its natural zero, reached by a strongly negative signal, and the bound holds for every
+        positive part of how far the corrected prior lies below the minimum, times the
+        coincidence ``gate`` (:meth:`coincidence`): "nothing added" is its natural zero, reached
+        by a strongly negative signal or by operands that coincide, and the bound holds for every
         output by construction (sorting keeps it: the i-th smallest of values each below a sorted
         bound is below the bound's i-th). Returns (z, decrease).
         """
-        decrease = nn.functional.softplus(SHARPNESS * (floor - proposal)) / SHARPNESS
+        decrease = gate * nn.functional.softplus(SHARPNESS * (floor - proposal)) / SHARPNESS
         return floor - decrease, decrease
 
     def sigma(self, union: torch.Tensor, transferred: torch.Tensor, decrease: torch.Tensor) -> torch.Tensor:

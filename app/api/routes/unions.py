@@ -18,9 +18,10 @@ from app.api.examples import success
 from app.api.metrics import INFERENCE
 from app.api.operands import MAX_OPERANDS, Operand, resolve_operands
 from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
+from app.contract import INTERVAL_Z
 from app.core.config import Settings
 from app.geometry.plausibility import size_warnings
-from app.inference.models import INTERVAL_Z, SpectralModels, Union
+from app.inference.models import SpectralModels, Union
 from app.inference.template import PART_NAMES, coloured_template
 from app.retrieval.store import StoreUnavailable
 
