@@ -83,6 +83,19 @@ def score_command(
     typer.echo(f"scored {models} on {data}: {len(metrics['rows'])} rows, {len(metrics['strata'])} strata → {out}")
 
 
+@cli.command("compare")
+def compare_command(
+    before: Annotated[Path, typer.Argument(help="metrics of the earlier model (metrics.json or score output)")],
+    after: Annotated[Path, typer.Argument(help="metrics of the new model, on the same data set")],
+) -> None:
+    """Print every table of the card before → after, as Markdown (for the card's prose)."""
+    import json
+
+    from training.learning.compare import comparison
+
+    typer.echo(comparison(json.loads(before.read_text()), json.loads(after.read_text())), nl=False)
+
+
 def _pipeline(verb: str, data: Path, runs: Path, models: Path, preset: str, seed: int) -> None:
     from training.learning.pipeline import TRAINING_PRESETS, UnfinishedRuns, run_pipeline
 

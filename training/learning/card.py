@@ -18,7 +18,7 @@ PAPER_ROWS = [
 BASELINES = ("elementwise_min", "larger_part", "lookup")
 
 
-def _pct(x: float) -> str:
+def percent(x: float) -> str:
     return f"{100 * x:.1f} %"
 
 
@@ -38,10 +38,11 @@ def union_table(metrics: dict) -> list[str]:
         row = rows[key]
         ours = row["union"]["operator"]
         paper_cell = "{:.2f} / {:.2f}".format(*paper[key]) if key in paper else "—"
-        baselines = " | ".join(f"{row['union'][b]['mae']:.2f} / {_pct(row['union'][b]['mre'])}" for b in BASELINES)
+        baselines = " | ".join(f"{row['union'][b]['mae']:.2f} / {percent(row['union'][b]['mre'])}" for b in BASELINES)
         lines.append(
-            f"| {key} | {row['rows']} | {paper_cell} | {ours['mse']:.2f} / {ours['mae']:.2f} / {_pct(ours['mre'])} | "
-            f"{_pct(row['interval_coverage'])} | {baselines} |"
+            f"| {key} | {row['rows']} | {paper_cell} | "
+            f"{ours['mse']:.2f} / {ours['mae']:.2f} / {percent(ours['mre'])} | "
+            f"{percent(row['interval_coverage'])} | {baselines} |"
         )
     return lines
 
@@ -59,7 +60,7 @@ def per_eigenvalue_table(metrics: dict, methods: tuple[str, ...] = ("operator", 
         "|---" * (len(columns) + 1) + "|",
     ]
     for index in range(len(next(iter(pooled.values())))):
-        cells = " | ".join(_pct(pooled[column][index]) for column in columns)
+        cells = " | ".join(percent(pooled[column][index]) for column in columns)
         lines.append(f"| λ{index + 1} | {cells} |")
     return lines
 
@@ -74,7 +75,7 @@ def localization_table(metrics: dict) -> list[str]:
         if row is None:
             continue
         cells = " | ".join(
-            f"{_pct(row['localization'][n]['iou'])} / {_pct(row['localization'][n]['accuracy'])}" for n in names
+            f"{percent(row['localization'][n]['iou'])} / {percent(row['localization'][n]['accuracy'])}" for n in names
         )
         reference = f"{paper['one'][key][0]:.2f} % / {paper['six'][key][0]:.2f} %"
         lines.append(f"| {key} | {cells} | {reference} |")
@@ -85,14 +86,14 @@ def extra_table(metrics: dict) -> list[str]:
     chains, floor = metrics["chains"], metrics["noise_floor"]
     lines = ["| case | n | method | mse | mae | mre | 90 % coverage |", "|---|---|---|---|---|---|---|"]
     for name, errors in chains.get("union", {}).items():
-        covered = _pct(chains["interval_coverage"]) if name == "operator" and "interval_coverage" in chains else "—"
+        covered = percent(chains["interval_coverage"]) if name == "operator" and "interval_coverage" in chains else "—"
         lines.append(
             f"| chain (A∪B)∪C | {chains['rows']} | {name} | {errors['mse']:.2f} | {errors['mae']:.2f} | "
-            f"{_pct(errors['mre'])} | {covered} |"
+            f"{percent(errors['mre'])} | {covered} |"
         )
     lines.append(
         f"| pose noise floor | {floor['rows']} | same region, other pose | {floor['mse']:.2f} | {floor['mae']:.2f} | "
-        f"{_pct(floor['mre'])} | — |"
+        f"{percent(floor['mre'])} | — |"
     )
     return lines
 
@@ -111,8 +112,10 @@ def strata_table(metrics: dict) -> list[str]:
         best = min(union[b]["mre"] for b in BASELINES)
         ratio = f"{best / ours['mre']:.2f}×" if ours["mre"] > 0 else "exact"
         lines.append(
-            f"| {key} | {row['rows']} | {ours['mae']:.2f} / {_pct(ours['mre'])} | {_pct(row['interval_coverage'])} | "
-            f"{_pct(row['above_minimum'])} | " + " | ".join(_pct(union[b]["mre"]) for b in BASELINES) + f" | {ratio} |"
+            f"| {key} | {row['rows']} | {ours['mae']:.2f} / {percent(ours['mre'])} | "
+            f"{percent(row['interval_coverage'])} | {percent(row['above_minimum'])} | "
+            + " | ".join(percent(union[b]["mre"]) for b in BASELINES)
+            + f" | {ratio} |"
         )
     return lines
 
@@ -140,15 +143,15 @@ def goals_table(metrics: dict) -> list[str]:
     identical = _strata_rows(metrics, "test_c", ("identical",))
     if identical:
         worst = max(r["union"]["operator"]["mre"] for r in identical)
-        add("U(A, A) within 0.5 % of A (Test C identical)", _pct(worst), worst <= 0.005)
+        add("U(A, A) within 0.5 % of A (Test C identical)", percent(worst), worst <= 0.005)
     same = _strata_rows(metrics, "test_c", ("same_region",))
     if same:
         value = _pooled(same, "operator")
-        add("U(A, A′) mre ≤ 2 % (Test C same region, other pose or meshing)", _pct(value), value <= 0.02)
+        add("U(A, A′) mre ≤ 2 % (Test C same region, other pose or meshing)", percent(value), value <= 0.02)
     nested = _strata_rows(metrics, "test_c", ("nested",))
     if nested:
         ours, floor = _pooled(nested, "operator"), _pooled(nested, "elementwise_min")
-        add("nested: no worse than the elementwise minimum", f"{_pct(ours)} vs {_pct(floor)}", ours <= floor)
+        add("nested: no worse than the elementwise minimum", f"{percent(ours)} vs {percent(floor)}", ours <= floor)
     others = [
         (key, row)
         for key, row in metrics.get("strata", {}).items()
@@ -160,7 +163,7 @@ def goals_table(metrics: dict) -> list[str]:
         best = min(row["union"][b]["mre"] for b in BASELINES)
         add(
             f"{key}: mre ≤ 10 % and ≥ 1.5× better than the best baseline",
-            f"{_pct(ours)}, {best / ours:.2f}×",
+            f"{percent(ours)}, {best / ours:.2f}×",
             ours <= 0.10 and best >= 1.5 * ours,
         )
     coverage = [
@@ -174,7 +177,7 @@ def goals_table(metrics: dict) -> list[str]:
         low, high = min(v for _, v in coverage), max(v for _, v in coverage)
         add(
             "90 % interval covers 87–93 % in every Test C stratum and Test B row",
-            f"{len(inside)} of {len(coverage)} rows inside; range {_pct(low)}–{_pct(high)}",
+            f"{len(inside)} of {len(coverage)} rows inside; range {percent(low)}–{percent(high)}",
             len(inside) == len(coverage),
         )
     return lines
@@ -188,20 +191,20 @@ def session_table(metrics: dict) -> list[str]:
         "|---" * (len(methods) + 3) + "|",
     ]
     for kind, row in metrics.get("test_c_kinds", {}).items():
-        cells = " | ".join(_pct(row["union"][m]["mre"]) for m in methods)
+        cells = " | ".join(percent(row["union"][m]["mre"]) for m in methods)
         lines.append(f"| {kind} | {row['rows']} | {cells} | — |")
     chains = metrics.get("test_c_chains", {})
     for length, row in chains.items():
         if length == "associativity":
             continue
-        cells = " | ".join(_pct(row["union"][m]["mre"]) if m in row["union"] else "—" for m in methods)
-        lines.append(f"| chain of {length} views | {row['rows']} | {cells} | {_pct(row['interval_coverage'])} |")
+        cells = " | ".join(percent(row["union"][m]["mre"]) if m in row["union"] else "—" for m in methods)
+        lines.append(f"| chain of {length} views | {row['rows']} | {cells} | {percent(row['interval_coverage'])} |")
     if "associativity" in chains:
         gap = chains["associativity"]
         lines += [
             "",
             f"Associativity on {gap['rows']} chains of views 0, 1, 2: mean relative gap between (A ∪ B) ∪ C and "
-            f"A ∪ (B ∪ C) of {_pct(gap['mean_relative_gap'])} (λ₂…λ₂₀).",
+            f"A ∪ (B ∪ C) of {percent(gap['mean_relative_gap'])} (λ₂…λ₂₀).",
         ]
     return lines
 

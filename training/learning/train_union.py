@@ -134,40 +134,66 @@ def predict(
 
 
 DECREASE_WEIGHTS = (0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)  # σ's decrease term, relative to the spread's
+DISAGREEMENT_WEIGHTS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0)  # σ's disagreement term, relative to the spread's
 CALIBRATION_BINS = 5
+COINCIDENT = 0.5  # a validation pair whose coincidence gate is below this is taken for one region twice
+
+
+@torch.no_grad()
+def coincidence(model: UnionOperator, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n,) the operator's coincidence gate of each pair (1 when it has none)."""
+    device = next(model.parameters()).device
+    a_t, b_t = _tensor(a, device), _tensor(b, device)
+    scale = common_scale(a_t, b_t)
+    return model.coincidence(relative_log(a_t, scale), relative_log(b_t, scale))[:, 0].cpu().numpy()
+
+
+def calibration_bins(model: UnionOperator, a: np.ndarray, b: np.ndarray, added: np.ndarray) -> np.ndarray:
+    """(n,) the bin each validation pair's coverage is checked in: pairs taken for one region
+    scanned twice (spectra not identical: those are exact) in bin 0 when there are enough of
+    them, then every other pair by quintiles of how much the operator says the parts add.
+    One spectrum twice goes to -1, in no bin."""
+    gate = coincidence(model, a, b)
+    identical = (a == b).all(1)
+    twice = (gate < COINCIDENT) & ~identical
+    if twice.sum() < 2 * CALIBRATION_BINS:
+        twice[:] = False
+    apart = ~twice & ~identical
+    edges = np.quantile(added[apart], np.linspace(0, 1, CALIBRATION_BINS + 1)[1:-1]) if apart.any() else []
+    bins = 1 + np.searchsorted(edges, added)
+    return np.where(identical, -1, np.where(twice, 0, bins))
 
 
 def calibrate(
     model: UnionOperator, a: np.ndarray, b: np.ndarray, union: np.ndarray, bodies: tuple[np.ndarray, np.ndarray]
-) -> tuple[float, float]:
-    """Fit σ's two weights so that μ ± z·σ holds 90 % of the validation eigenvalues, and as
-    evenly as it can across pairs that add little and pairs that add much.
+) -> tuple[float, float, float]:
+    """Fit σ's three weights so that μ ± z·σ holds 90 % of the validation eigenvalues, and as
+    evenly as it can across pairs that add little and pairs that add much, and pairs taken for
+    one region scanned twice.
 
-    For each relative weight of the decrease term the common factor is the one that covers 90 %
-    overall; the weight kept is the one whose worst coverage over quintiles of the predicted
-    decrease is nearest 90 %. Returns (spread weight, decrease weight).
+    For each relative weight of the decrease and disagreement terms the common factor is the
+    one that covers 90 % overall; the weights kept are those whose worst coverage over the bins
+    of :func:`calibration_bins` is nearest 90 %. Returns (spread, decrease, disagreement) weights.
     """
     parts = []
-    for spread, decrease in ((1.0, 0.0), (0.0, 1.0)):
-        model.sigma_scale.fill_(spread)
-        model.sigma_decrease.fill_(decrease)
+    for weights in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)):
+        model.set_sigma_weights(*weights)
         mean, sigma = predict(model, a, b, bodies)
         parts.append(sigma)
     error = np.abs(mean - union)
-    added = parts[1].mean(1) / np.maximum(np.abs(mean).mean(1), 1e-12)
-    edges = np.quantile(added, np.linspace(0, 1, CALIBRATION_BINS + 1)[1:-1])
-    bins = np.searchsorted(edges, added)
-    best = (np.inf, 1.0, 0.0)
-    for weight in DECREASE_WEIGHTS if model.config.parametrization == MONOTONE else (0.0,):
-        sigma = np.maximum(parts[0] + weight * parts[1], 1e-12)
-        factor = float(np.quantile(error / sigma, 0.9) / INTERVAL_Z)
-        covered = error <= INTERVAL_Z * factor * sigma
-        worst = max(abs(covered[bins == i].mean() - 0.9) for i in np.unique(bins))
-        if worst < best[0]:
-            best = (worst, factor, factor * weight)
-    model.sigma_scale.fill_(best[1])
-    model.sigma_decrease.fill_(best[2])
-    return best[1], best[2]
+    bins = calibration_bins(model, a, b, parts[1].mean(1) / np.maximum(np.abs(mean).mean(1), 1e-12))
+    monotone = model.config.parametrization == MONOTONE
+    best = (np.inf, 1.0, 0.0, 0.0)
+    for weight in DECREASE_WEIGHTS if monotone else (0.0,):
+        for other in DISAGREEMENT_WEIGHTS if model.gated else (0.0,):
+            sigma = np.maximum(parts[0] + weight * parts[1] + other * parts[2], 1e-12)
+            factor = float(np.quantile(error / sigma, 0.9) / INTERVAL_Z)
+            covered = error <= INTERVAL_Z * factor * sigma
+            worst = max(abs(covered[bins == i].mean() - 0.9) for i in np.unique(bins[bins >= 0]))
+            if worst < best[0]:
+                best = (worst, factor, factor * weight, factor * other)
+    model.set_sigma_weights(*best[1:])
+    return best[1:]
 
 
 def build_operator(train: PairTable, config: UnionConfig) -> UnionOperator:

@@ -209,11 +209,13 @@ class UnionOperator(nn.Module):
         self.config = config
         self.memory = memory
         self.correction = CORRECTIONS[config.correction](config)
-        if config.coincidence_gate:
+        self.gated = config.coincidence_gate and config.parametrization == MONOTONE
+        if self.gated:
             self.log_gate_width = nn.Parameter(torch.tensor(math.log(GATE_WIDTH)))
         # Interval calibration weights, fitted on validation data after training.
         self.register_buffer("sigma_scale", torch.ones(()))
         self.register_buffer("sigma_decrease", torch.zeros(()))
+        self.register_buffer("sigma_disagreement", torch.zeros(()))
 
     def forward(
         self, a: torch.Tensor, b: torch.Tensor, exclude: torch.Tensor | None = None
@@ -226,12 +228,14 @@ class UnionOperator(nn.Module):
         # What each neighbour's parts added to each other, taken off this pair's minimum.
         transferred = floor[:, None] - (floors - priors)
         change = self.correction(za, zb, torch.cat([priors, transferred], dim=1), distances)
+        gate = self.coincidence(za, zb)
         if self.config.parametrization == MONOTONE:
-            z, decrease = self.decreased(floor, priors[:, 0] + change, self.coincidence(za, zb))
+            z, decrease = self.decreased(floor, priors[:, 0] + change, gate)
         else:
             z, decrease = priors[:, 0] + change, torch.zeros_like(change)
         union = torch.sort(torch.relu(torch.exp(z) - EPSILON), dim=-1).values
-        return union * scale, self.sigma(union, transferred, decrease) * scale
+        disagreement = (1 - gate) * (za - zb).abs()  # of operands taken for one region; 0 when not gated
+        return union * scale, self.sigma(union, transferred, decrease, disagreement) * scale
 
     def coincidence(self, za: Tensor, zb: Tensor) -> Tensor:
         """(B, 1): how far apart the operands are, 0 when their spectra are one, near 1 when
@@ -245,9 +249,9 @@ class UnionOperator(nn.Module):
         saw. Symmetric bit for bit ((a − b)² = (b − a)² in IEEE arithmetic) and scale-free (z is
         in the pair's common scale). The price: two different parts whose spectra coincide (a
         region and its mirror image) are united as one, which no spectrum-only operator can tell
-        apart. Without the gate (``coincidence_gate=False``), 1.
+        apart. Without the gate (``coincidence_gate=False``, or the PRIOR parametrization), 1.
         """
-        if not self.config.coincidence_gate:
+        if not self.gated:
             return torch.ones_like(za[:, :1])
         msd = (za - zb).pow(2).mean(-1, keepdim=True)
         return 1 - torch.exp(-msd * torch.exp(-2 * self.log_gate_width))
@@ -267,9 +271,17 @@ class UnionOperator(nn.Module):
         decrease = gate * nn.functional.softplus(SHARPNESS * (floor - proposal)) / SHARPNESS
         return floor - decrease, decrease
 
-    def sigma(self, union: torch.Tensor, transferred: torch.Tensor, decrease: torch.Tensor) -> torch.Tensor:
+    @torch.no_grad()
+    def set_sigma_weights(self, spread: float, decrease: float, disagreement: float) -> None:
+        """The weights of σ's three terms (:meth:`sigma`), as the calibration fits them."""
+        self.sigma_scale.fill_(spread)
+        self.sigma_decrease.fill_(decrease)
+        self.sigma_disagreement.fill_(disagreement)
+
+    def sigma(self, union: Tensor, transferred: Tensor, decrease: Tensor, disagreement: Tensor) -> Tensor:
         """σ relative to the common scale, from how far the neighbours' answers lie from the
-        prediction and how far the prediction lies below the operands' minimum.
+        prediction, how far the prediction lies below the operands' minimum, and how far apart
+        two operands taken for one region are.
 
         A neighbour's answer here is what its parts added to each other, taken off this pair's
         minimum: neighbours that agree on that are sure, whatever their own size (a part with
@@ -277,12 +289,16 @@ class UnionOperator(nn.Module):
         floor; their unions themselves, other bodies' parts, spread widely). The root-mean-square
         distance in z of those answers is a spread of plausible answers; the decrease is how much
         the operator claims the parts add to each other, zero and certain for a part united with
-        itself or with a part containing it. Their
-        weights are fitted on validation data to a calibrated interval (``sigma_scale`` for the
-        spread, ``sigma_decrease`` for the decrease). A learned σ head, trained by Gaussian
-        likelihood next to the mean, cost the mean a tenth of its accuracy (validation mae
-        5.1 → 5.5) and diverged on chains.
+        itself or with a part containing it. Two scans of one region (the gate near 0) differ by
+        their pose and meshing, and the union is known no better than they agree: the third term
+        is their difference in z at each eigenvalue, times 1 − gate (0 for parts the gate takes
+        for different ones, and for one spectrum twice, which is exact). The weights are fitted
+        on validation data to a calibrated interval (``sigma_scale`` for the spread,
+        ``sigma_decrease`` for the decrease, ``sigma_disagreement`` for the third). A learned σ
+        head, trained by Gaussian likelihood next to the mean, cost the mean a tenth of its
+        accuracy (validation mae 5.1 → 5.5) and diverged on chains.
         """
         spread = (transferred - relative_log(union, 1.0)[:, None]).pow(2).mean(1).sqrt()
         relative = (spread + SIGMA_FLOOR) * self.sigma_scale + decrease * self.sigma_decrease
+        relative = relative + disagreement * self.sigma_disagreement
         return relative * (union + EPSILON)
