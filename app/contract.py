@@ -1,8 +1,10 @@
 """What training writes and the service reads, defined once and imported by both sides.
 
-The artefact file names in ``models/``, the ONNX graphs' input and output names, and what the
-union's ``sigma`` and the localizer's probability mean. ``training`` exports by these names and
-``app`` feeds and reads by them, so a renamed input cannot reach one side only.
+The artefact file names in ``models/``, the ONNX graphs' input and output names, what the
+union's ``sigma`` and the localizer's probability mean, and the spectrum definition the models
+are trained on. ``training`` exports by these names and ``app`` feeds and reads by them, so a
+renamed input cannot reach one side only; the definition is stamped into ``MANIFEST.json`` at
+export and checked at start-up, so a model is never served spectra computed another way.
 """
 
 import numpy as np
@@ -14,6 +16,17 @@ LOCALIZER_INPUTS = ("spectrum",)  # float32 (batch, k)
 LOCALIZER_OUTPUTS = ("probability",)  # float32 (batch, template vertices)
 MASK_THRESHOLD = 0.5  # a template vertex is in the region when the localizer's probability reaches this
 INTERVAL_Z = 1.6449  # σ is calibrated so that union ± INTERVAL_Z·σ holds 90 % of held-out eigenvalues
+
+# The spectrum definition: what app.geometry computes from a shape (ARCHITECTURE.md, "Spectra: the
+# one definition"). Bump SPECTRUM_VERSION whenever the spectrum code changes what it computes
+# (Laplacian, mass, boundary conditions, cleaning), so that models trained before are refused.
+SPECTRUM_VERSION = 1
+MAX_HOLE_EDGES = 8  # boundary loops up to this many edges are pin-holes, filled before the solve
+
+
+def spectrum_definition() -> dict[str, int]:
+    """What a model's training spectra were computed with, as stamped in ``MANIFEST.json``."""
+    return {"version": SPECTRUM_VERSION, "max_hole_edges": MAX_HOLE_EDGES}
 
 
 def union_feeds(a: np.ndarray, b: np.ndarray) -> dict[str, np.ndarray]:

@@ -9,6 +9,7 @@ next request that needs it, so a replica recovers without a restart.
 import anyio
 
 from app.api.problems import RETRY_AFTER_UNAVAILABLE, ProblemError
+from app.contract import MAX_HOLE_EDGES
 from app.core.config import Settings
 from app.inference.models import SpectralModels
 from app.retrieval.seed import open_store
@@ -29,6 +30,13 @@ class Resources:
         self._open_store()
 
     def _open_models(self) -> None:
+        if self.settings.max_hole_edges != MAX_HOLE_EDGES:
+            self.models_problem = (
+                f"SPECTRAL_UNIONS_MAX_HOLE_EDGES={self.settings.max_hole_edges} changes the spectrum definition "
+                f"the models were trained on (max_hole_edges={MAX_HOLE_EDGES}): spectra are served, unions and "
+                "regions are not"
+            )
+            return
         try:
             self.models = SpectralModels(self.settings.models_dir)
         except Exception as exc:  # any unusable artefact (missing, corrupt, mismatched): not ready, with the reason

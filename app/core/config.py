@@ -7,6 +7,8 @@ from pathlib import Path
 from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from app.contract import MAX_HOLE_EDGES
+
 
 class Settings(BaseSettings):
     """Service settings; every field can be overridden by ``SPECTRAL_UNIONS_<FIELD>``."""
@@ -18,7 +20,10 @@ class Settings(BaseSettings):
     )
     max_vertices: int = Field(100_000, gt=0, description="Vertex cap for an uploaded shape.")
     max_hole_edges: int = Field(
-        8, ge=0, description="Boundary loops up to this many edges are pin-holes and get filled."
+        MAX_HOLE_EDGES,
+        ge=0,
+        description="Boundary loops up to this many edges are pin-holes and get filled. Part of the spectrum "
+        "definition the models are trained on: another value serves spectra, but not unions or regions.",
     )
     models_dir: Path = Field(
         Path(__file__).resolve().parents[2] / "models",

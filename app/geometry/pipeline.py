@@ -9,6 +9,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field
 
+from app.contract import MAX_HOLE_EDGES
 from app.geometry.errors import InvalidGeometry
 from app.geometry.io import load_shape, unit_scale
 from app.geometry.laplacian import Operators, mesh_operators, point_cloud_operators
@@ -30,7 +31,7 @@ class SpectrumOptions:
     closed: bool = False
     boundary_indices: list[int] | None = None
     max_vertices: int = 100_000
-    max_hole_edges: int = 8
+    max_hole_edges: int = MAX_HOLE_EDGES
 
 
 @dataclass(frozen=True)

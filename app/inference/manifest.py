@@ -1,12 +1,17 @@
-"""Checksums of the artefacts the service loads, kept next to them in ``MANIFEST.json``.
+"""Checksums of the artefacts the service loads, kept next to them in ``MANIFEST.json``, and
+the spectrum definition the models were trained on.
 
 A truncated download or a half-copied file still parses often enough to give wrong answers;
-comparing SHA-256 digests before loading turns that into a clear "models unavailable".
+comparing SHA-256 digests before loading turns that into a clear "models unavailable". So does a
+model trained on spectra computed another way (an older spectrum code): it would load and answer,
+wrongly, for every request.
 """
 
 import hashlib
 import json
 from pathlib import Path
+
+from app.contract import spectrum_definition
 
 MANIFEST_FILE = "MANIFEST.json"
 ARTEFACTS = ("union.onnx", "localizer.onnx", "template.npz", "template.json")
@@ -23,15 +28,24 @@ def digest(path: Path) -> str:
 def write_manifest(directory: Path) -> None:
     """Record the digests of the served artefacts (run after every export)."""
     entries = {name: digest(directory / name) for name in ARTEFACTS}
-    (directory / MANIFEST_FILE).write_text(json.dumps({"sha256": entries}, indent=1) + "\n")
+    manifest = {"sha256": entries, "spectrum_definition": spectrum_definition()}
+    (directory / MANIFEST_FILE).write_text(json.dumps(manifest, indent=1) + "\n")
 
 
 def verify_manifest(directory: Path) -> None:
-    """Raise :class:`ModelsCorrupt` unless every artefact is present and matches the manifest."""
+    """Raise :class:`ModelsCorrupt` unless every artefact is present and matches the manifest,
+    and the models were trained on this service's spectrum definition."""
     manifest = directory / MANIFEST_FILE
     if not manifest.exists():
         raise ModelsCorrupt(f"{manifest} is missing: the artefacts cannot be checked")
-    recorded = json.loads(manifest.read_text())["sha256"]
+    content = json.loads(manifest.read_text())
+    trained_on = content.get("spectrum_definition")
+    if trained_on != spectrum_definition():
+        raise ModelsCorrupt(
+            f"the models were trained on spectrum definition {trained_on}, this service computes "
+            f"{spectrum_definition()}: retrain them (make models) or serve the matching version"
+        )
+    recorded = content["sha256"]
     for name in ARTEFACTS:
         path = directory / name
         if not path.exists():

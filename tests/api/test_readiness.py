@@ -51,6 +51,32 @@ def test_a_damaged_model_file_makes_the_service_not_ready_and_its_endpoints_503(
         assert client.get("/v1/shapes").status_code == 200  # the database needs no model
 
 
+def test_models_trained_on_another_spectrum_definition_are_refused(tmp_path, models_copy):
+    """A manifest stamped with another definition (or none: models from before the stamp) loads
+    no model: its answers would be wrong for every request."""
+    manifest = models_copy / "MANIFEST.json"
+    content = json.loads(manifest.read_text())
+    for stamp in ({**content["spectrum_definition"], "version": 0}, None):
+        content["spectrum_definition"] = stamp
+        manifest.write_text(json.dumps(content))
+        with app_with(tmp_path, models_dir=models_copy) as client:
+            ready = client.get("/readyz")
+            assert ready.status_code == 503 and "spectrum definition" in ready.json()["detail"]
+            assert client.post("/v1/union", data=spectra_form()).json()["type"] == "/problems/models-unavailable"
+
+
+def test_a_setting_that_changes_the_spectrum_definition_serves_no_union(tmp_path):
+    """Filling larger holes than the models' training spectra did changes every spectrum: the
+    models are not served, and the reason names the setting."""
+    with app_with(tmp_path, max_hole_edges=4) as client:
+        ready = client.get("/readyz")
+        assert ready.status_code == 503 and "SPECTRAL_UNIONS_MAX_HOLE_EDGES=4" in ready.json()["detail"]
+        union = client.post("/v1/union", data=spectra_form())
+        assert union.status_code == 503 and "max_hole_edges=8" in union.json()["detail"]
+    with app_with(tmp_path) as client:
+        assert client.post("/v1/union", data=spectra_form()).status_code == 200
+
+
 def test_an_unreachable_database_leaves_the_spectral_endpoints_working(tmp_path):
     url = f"postgresql://nobody@127.0.0.1:{free_port()}/none"
     with app_with(tmp_path, database_url=url) as client:
