@@ -21,7 +21,7 @@ from app.inference.template import PART_NAMES, Template
 
 
 @dataclass(frozen=True)
-class Union:
+class UnionEstimate:
     """A predicted union spectrum and its calibrated per-eigenvalue uncertainty (1/m²)."""
 
     eigenvalues: np.ndarray
@@ -91,7 +91,7 @@ class SpectralModels:
         digest = hashlib.sha256((directory / UNION_FILE).read_bytes() + (directory / LOCALIZER_FILE).read_bytes())
         self.version = digest.hexdigest()[:12]  # content hash: two replicas agree iff they serve the same models
 
-    def union(self, spectra: list[np.ndarray]) -> Union:
+    def union(self, spectra: list[np.ndarray]) -> UnionEstimate:
         """Union of the spectra, folded left to right: ((A ∪ B) ∪ C) ∪ …, as trained; one is
         returned as is. σ carries each inner union's uncertainty on (:func:`chained_sigma`)."""
         current, sigma = spectra[0].astype(np.float64), np.zeros(self.k)
@@ -100,7 +100,7 @@ class SpectralModels:
             sigma = chained_sigma(current, sigma, union[0].astype(np.float64), step_sigma[0].astype(np.float64))
             current = union[0].astype(np.float64)
         _require_finite(current, sigma)
-        return Union(current, sigma)
+        return UnionEstimate(current, sigma)
 
     def localize(self, spectrum: np.ndarray) -> Region:
         """The template region whose spectrum this is (up to left/right: spectra cannot tell)."""

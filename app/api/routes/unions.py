@@ -21,7 +21,7 @@ from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem
 from app.contract import INTERVAL_Z
 from app.core.config import Settings
 from app.geometry.plausibility import size_warnings
-from app.inference.models import SpectralModels, Union
+from app.inference.models import SpectralModels, UnionEstimate
 from app.inference.template import PART_NAMES, coloured_template
 from app.retrieval.store import StoreUnavailable
 
@@ -97,7 +97,7 @@ class UnionOutcome:
     """The operands of a request, their union and what each step cost."""
 
     operands: list[Operand]
-    result: Union
+    result: UnionEstimate
     solve_ms: float
     inference_ms: float
     warnings: list[str]
