@@ -40,7 +40,12 @@ from training.data.samples import export_samples
 from training.data.spectra import CLOUD, MESH, REMESHED, VARIANTS, task_spectrum
 from training.data.template import Template
 
-MASK_STREAMS = {"pair": 0, "candidate": 1, "triple": 1, "retrieval": 2, "overlap": 3}  # per-kind seed word
+# Per-kind seed word. "candidate" and "triple" share one: a candidate chunk's first draw may repeat
+# the union of the same chunk's first triple. Harmless, so kept (a new word would redraw every
+# Test B union and the committed tables with them): candidates are only offered as Test B union
+# types, and one that equals a triple's union has IoU 1 with a seen union, so the novelty filter
+# (_held_out_unions, IoU < 0.8 with every training and triple union) always drops it.
+MASK_STREAMS = {"pair": 0, "candidate": 1, "triple": 1, "retrieval": 2, "overlap": 3}
 TEST_B_MAX_IOU = 0.8  # a Test B union overlaps every training union (or its mirror) less than this
 TEST_B_TYPES = 30  # held-out union types, each realized by many different pairs
 SPLIT_ATTEMPTS = 20  # tries per wanted Test B pair
