@@ -1,11 +1,12 @@
 """Operands of the spectral endpoints: uploaded files and spectra the client already has.
 
 Files (multipart field ``files``, repeated) are solved server-side by the solver workers
-(``app.api.solver``); spectra (form field ``spectra``, a JSON list of eigenvalue
+(``app.api.solver``), all of a request's files at once; spectra (form field ``spectra``, a JSON list of eigenvalue
 lists) are checked. Operands are taken in that order: files as uploaded, then spectra. An
 error names the operand it is about.
 """
 
+import asyncio
 import time
 from dataclasses import dataclass
 from typing import Literal
@@ -107,17 +108,30 @@ async def resolve_operands(
             f"at most {MAX_OPERANDS} operands (files and spectra), got {count}",
         )
     options = upload_options(settings, k, units, scale)
-    operands: list[Operand] = []
+    sources = [f"files[{index}] {upload.filename or ''}".strip() for index, upload in enumerate(files)]
     started = time.perf_counter()
-    for index, upload in enumerate(files):
-        source = f"files[{index}] {upload.filename or ''}".strip()
-        data = await upload.read()
-        try:
-            report = await solve_upload(request, data, resolve_file_type(upload.filename, None), options)
-        except GeometryError as exc:
-            exc.args = (f"{source}: {exc}",)
-            raise
-        operands.append(Operand(source, report.eigenvalues, report))
+    reports = await _solve_all(request, files, options)
     solve_ms = (time.perf_counter() - started) * 1e3
+    for source, report in zip(sources, reports, strict=True):
+        if isinstance(report, GeometryError):
+            report.args = (f"{source}: {report}",)
+        if isinstance(report, BaseException):
+            raise report  # the first failing file, in upload order
+    operands = [Operand(source, report.eigenvalues, report) for source, report in zip(sources, reports, strict=True)]
     operands += [Operand(f"spectra[{i}]", values, None) for i, values in enumerate(given)]
     return operands, solve_ms
+
+
+async def _solve_all(
+    request: Request, files: list[UploadFile], options: SpectrumOptions
+) -> list[SpectrumReport | BaseException]:
+    """Every file solved at once on the solver pool (a union of two scans costs one solve's
+    latency, not two), each outcome in upload order: a report, or the exception it raised.
+    Every solve runs to its end (each is bounded by the pool's deadline and caps), so a failure
+    is reported for the first failing file whatever order the workers finish in."""
+
+    async def solve(upload: UploadFile) -> SpectrumReport:
+        data = await upload.read()
+        return await solve_upload(request, data, resolve_file_type(upload.filename, None), options)
+
+    return list(await asyncio.gather(*(solve(upload) for upload in files), return_exceptions=True))

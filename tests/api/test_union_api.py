@@ -123,6 +123,54 @@ def test_a_broken_file_operand_is_a_problem_naming_it(client, parts):
     assert "files[0] scan.ply" in response.json()["detail"]
 
 
+class MeetingSolver:
+    """A solver pool that answers a solve only once ``expected`` solves are in flight together:
+    a request that solves its files one after the other never gets an answer (its first solve
+    waits for a second that is never asked), and fails on the guard's timeout."""
+
+    def __init__(self, real, expected: int) -> None:
+        self.real, self.expected, self.in_flight, self.peak = real, expected, 0, 0
+
+    async def solve(self, data, file_type, options):
+        import asyncio
+
+        self.in_flight += 1
+        self.peak = max(self.peak, self.in_flight)
+        try:
+            async with asyncio.timeout(60):  # a deadlock guard, not a measured time
+                while self.peak < self.expected:
+                    await asyncio.sleep(0.01)
+            return await self.real.solve(data, file_type, options)
+        finally:
+            self.in_flight -= 1
+
+
+def test_a_request_s_files_are_solved_at_once_and_a_failure_names_the_first_failing_file(client, template, parts):
+    real = client.app.state.solver
+    meeting = MeetingSolver(real, expected=2)
+    client.app.state.solver = meeting
+    try:
+        body = ply_bytes(region(template, LEGS))
+        files = [("files", (name, io.BytesIO(body), "application/octet-stream")) for name in ("a.ply", "b.ply")]
+        response = union(client, [], files=files)
+        assert response.status_code == 200, response.text
+        assert meeting.peak == 2
+        np.testing.assert_allclose(
+            response.json()["eigenvalues"][:5], union(client, [parts[0]] * 2).json()["eigenvalues"][:5], rtol=1e-5
+        )
+        broken = io.BytesIO(b"ply\nformat nonsense\n")
+        files = [
+            ("files", ("fine.ply", io.BytesIO(body), "application/octet-stream")),
+            ("files", ("first-bad.ply", broken, "application/octet-stream")),
+            ("files", ("second-bad.ply", io.BytesIO(b"ply\nformat nonsense\n"), "application/octet-stream")),
+        ]
+        meeting.peak, meeting.expected = 0, 3
+        response = union(client, [], files=files)
+        assert response.status_code == 422 and "files[1] first-bad.ply" in response.json()["detail"]
+    finally:
+        client.app.state.solver = real
+
+
 def test_localize_reports_vertices_and_part_coverage(client, parts, template):
     response = client.post("/v1/localize", data={"spectra": json.dumps([parts[2]])})
     assert response.status_code == 200, response.text
