@@ -8,7 +8,7 @@ import pytest
 
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
-from tests.training.synthetic import SyntheticSource, synthetic_template
+from tests.training.data.synthetic import SyntheticSource, synthetic_template
 from training.data.build import PRESETS, TEST_B_MAX_IOU, build_dataset
 from training.data.overlaps import CAMERA, IDENTICAL, NESTED, RESCAN, TEST_C_GROUPS
 from training.data.pairs import AREA_TIE, MIN_GAIN, containment, symmetric_iou

@@ -14,7 +14,7 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("onnxscript")
 
-from tests.training.synthetic import SyntheticSource  # noqa: E402
+from tests.training.data.synthetic import SyntheticSource  # noqa: E402
 from training.data.build import PRESETS, build_dataset  # noqa: E402
 from training.learning.data import SpectralData  # noqa: E402
 from training.learning.export import session  # noqa: E402

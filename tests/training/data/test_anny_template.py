@@ -11,7 +11,7 @@ import pytest
 from app.geometry.topology import boundary_vertex_mask, face_areas
 from training.data.template import PART_NAMES, Template
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
+MODELS = Path(__file__).resolve().parents[3] / "models"
 
 
 @pytest.fixture(scope="module")
