@@ -18,8 +18,11 @@ from typing import Literal, Self
 import httpx
 
 from app.api.problems import PROBLEM_MEDIA_TYPE, Problem
-from app.api.routes.shapes import RetrieveResponse, ShapeOut, ShapePage
-from app.api.routes.unions import LocalizeResponse, ModelsResponse, UnionResponse
+from app.api.routes.localize import LocalizeResponse
+from app.api.routes.models import ModelsResponse
+from app.api.routes.retrieve import RetrieveResponse
+from app.api.routes.shapes import ShapeOut, ShapePage
+from app.api.routes.unions import UnionResponse
 from app.geometry.pipeline import SpectrumReport
 from app.geometry.spectrum import DEFAULT_K
 

@@ -16,7 +16,7 @@ from app.api.operands import MAX_OPERANDS
 from app.api.pages import install_pages
 from app.api.problems import install_problem_handlers
 from app.api.resources import Resources
-from app.api.routes import health, shapes, spectrum, unions
+from app.api.routes import health, localize, models, retrieve, shapes, spectrum, unions
 from app.api.shutdown import flip_readiness_on_exit_signals
 from app.api.solver import SolverPool
 from app.api.upload_limit import UploadLimitMiddleware
@@ -84,6 +84,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(health.router)
     app.include_router(metrics_router)
     app.include_router(spectrum.router, prefix="/v1")
-    app.include_router(unions.router, prefix="/v1")
-    app.include_router(shapes.router, prefix="/v1")
+    for routes in (unions, localize, models, retrieve, shapes):
+        app.include_router(routes.router, prefix="/v1")
     return app

@@ -1,13 +1,16 @@
-"""Dependencies shared by the routes."""
+"""Dependencies shared by the routes: settings, the models, the store, the write key."""
 
+import hmac
 from collections import Counter
 from collections.abc import Iterable
 from typing import Annotated
 
-from fastapi import Depends, Request
+from fastapi import Depends, Header, Request
 
 from app.api.problems import ProblemError
 from app.core.config import Settings
+from app.inference.models import SpectralModels
+from app.retrieval.store import ShapeStore
 
 # The one form field a client may repeat: one uploaded scan per ``files`` part.
 REPEATABLE_FIELDS = frozenset({"files"})
@@ -19,6 +22,35 @@ def app_settings(request: Request) -> Settings:
 
 
 SettingsDep = Annotated[Settings, Depends(app_settings)]
+
+
+def loaded_models(request: Request) -> SpectralModels:
+    """The served models, or 503 models-unavailable with the reason they are not."""
+    return request.app.state.resources.require_models()
+
+
+ModelsDep = Annotated[SpectralModels, Depends(loaded_models)]
+
+
+async def open_store(request: Request) -> ShapeStore:
+    """The ShapeDNA store, opened again if it was down; 503 database-unavailable if it still is."""
+    return await request.app.state.resources.require_store()
+
+
+StoreDep = Annotated[ShapeStore, Depends(open_store)]
+
+
+def require_write_key(settings: SettingsDep, x_api_key: Annotated[str | None, Header()] = None) -> None:
+    """Writes need the ``X-API-Key`` header to match the configured key (compared in constant
+    time); with no key configured, writes are refused outright."""
+    expected = settings.api_key.get_secret_value() if settings.api_key else None
+    if expected is None:
+        raise ProblemError(403, "writes-disabled", "Writes disabled", "no API key is configured on this server")
+    if x_api_key is None or not hmac.compare_digest(x_api_key.encode(), expected.encode()):
+        raise ProblemError(401, "invalid-api-key", "Invalid API key", "X-API-Key is missing or wrong")
+
+
+WriteKeyDep = Depends(require_write_key)
 
 
 async def refuse_repeated_parameters(request: Request) -> None:

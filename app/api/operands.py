@@ -9,9 +9,9 @@ error names the operand it is about.
 import asyncio
 import time
 from dataclasses import dataclass
-from typing import Literal
+from typing import Annotated, Literal
 
-from fastapi import Request, UploadFile
+from fastapi import File, Form, Query, Request, UploadFile
 
 from app.api import form_json
 from app.api.problems import ProblemError
@@ -24,6 +24,18 @@ from app.inference.spectra import InvalidSpectrum, checked_spectrum
 
 MAX_OPERANDS = 32
 OPERAND_FIELDS = ("files", "spectra")  # the form fields that carry operands
+
+# The operand parameters of every union-based route.
+FilesField = Annotated[
+    list[UploadFile] | None,
+    File(max_length=MAX_OPERANDS, description="Partial scans (mesh or point cloud), one operand each."),
+]
+SpectraField = Annotated[
+    str | None,
+    Form(description="JSON list of eigenvalue lists (1/m², ascending), e.g. a previous union.", examples=["[[...]]"]),
+]
+UnitsQuery = Annotated[Literal["m", "cm", "mm"], Query(description="Units of the uploaded files.")]
+ScaleQuery = Annotated[float | None, Query(gt=0, description="Factor to metres for the files; overrides units.")]
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,64 @@
+"""``POST /v1/localize``: where on the template body the union of the operands lies."""
+
+import time
+from typing import Annotated, Literal
+
+import anyio
+from fastapi import APIRouter, Query, Request, Response
+from pydantic import Field
+
+from app.api.deps import ModelsDep, SettingsDep
+from app.api.examples import success
+from app.api.metrics import INFERENCE
+from app.api.operands import FilesField, ScaleQuery, SpectraField, UnitsQuery
+from app.api.routes.unions import UNION_PROBLEMS, UnionResponse
+from app.api.unions import union_of_operands
+from app.inference.template import coloured_template
+
+router = APIRouter(tags=["unions"])
+
+
+class LocalizeResponse(UnionResponse):
+    vertices: list[int] = Field(description="Template vertices inside the region (or its mirror image).")
+    area_fraction: float = Field(description="Share of the template's area covered.")
+    part_coverage: dict[str, float] = Field(description="Covered share of each body part's area.")
+    template_vertices: int = Field(description="Vertices of the template body the indices refer to.")
+
+
+@router.post(
+    "/localize",
+    response_model=LocalizeResponse,
+    responses={
+        **UNION_PROBLEMS,
+        200: {"content": {"application/ply": {}, **success("localize")[200]["content"]}},
+    },
+)
+async def localize(
+    request: Request,
+    settings: SettingsDep,
+    models: ModelsDep,
+    files: FilesField = None,
+    spectra: SpectraField = None,
+    units: UnitsQuery = "m",
+    scale: ScaleQuery = None,
+    format: Annotated[
+        Literal["json", "ply"], Query(description="ply: the template mesh with the region as vertex colours.")
+    ] = "json",
+) -> LocalizeResponse | Response:
+    """Where on the template body the union of the operands lies, and how much of each part it covers."""
+    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale)
+    started = time.perf_counter()
+    region = await anyio.to_thread.run_sync(models.localize, outcome.result.eigenvalues)
+    INFERENCE.labels("localizer").observe(time.perf_counter() - started)
+    if format == "ply":
+        ply = await anyio.to_thread.run_sync(coloured_template, models.template, region.vertices)
+        return Response(
+            ply, media_type="application/ply", headers={"content-disposition": "inline; filename=region.ply"}
+        )
+    return LocalizeResponse(
+        **outcome.fields(models),
+        vertices=region.vertices.tolist(),
+        area_fraction=region.area_fraction,
+        part_coverage=region.part_coverage,
+        template_vertices=len(models.template.vertices),
+    )

@@ -1,0 +1,64 @@
+"""The union of a request's operands, shared by every endpoint that reads one (union, localize,
+retrieve): operands resolved (uploads solved), folded through the union operator, timed, and
+the warnings collected. No response shaping here: the routes do that.
+"""
+
+import time
+from dataclasses import dataclass
+from typing import Literal
+
+import anyio
+import numpy as np
+from fastapi import Request, UploadFile
+
+from app.api.metrics import INFERENCE
+from app.api.operands import Operand, resolve_operands
+from app.core.config import Settings
+from app.geometry.plausibility import size_warnings
+from app.inference.models import SpectralModels, UnionEstimate
+
+
+@dataclass(frozen=True)
+class UnionOutcome:
+    """The operands of a request, their union and what each step cost."""
+
+    operands: list[Operand]
+    result: UnionEstimate
+    solve_ms: float
+    inference_ms: float
+    warnings: list[str]
+
+    def fields(self, models: SpectralModels) -> dict:
+        """The response fields every union-based endpoint shares."""
+        return {
+            "eigenvalues": self.result.eigenvalues.tolist(),
+            "sigma": self.result.sigma.tolist(),
+            "lower": self.result.lower.tolist(),
+            "upper": self.result.upper.tolist(),
+            "operands": [{"source": o.source, "eigenvalues": o.eigenvalues} for o in self.operands],
+            "model_version": models.version,
+            "solve_ms": round(self.solve_ms, 2),
+            "inference_ms": round(self.inference_ms, 2),
+            "warnings": self.warnings,
+        }
+
+
+async def union_of_operands(
+    request: Request,
+    settings: Settings,
+    models: SpectralModels,
+    files: list[UploadFile] | None,
+    spectra: str | None,
+    units: Literal["m", "cm", "mm"],
+    scale: float | None,
+) -> UnionOutcome:
+    """Resolve the operands (solving uploaded files) and fold them through the union operator."""
+    operands, solve_ms = await resolve_operands(request, settings, files, spectra, models.k, units, scale)
+    started = time.perf_counter()
+    values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
+    result = await anyio.to_thread.run_sync(models.union, values)
+    seconds = time.perf_counter() - started
+    INFERENCE.labels("union").observe(seconds)
+    warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]
+    warnings += size_warnings(values, [o.source for o in operands])
+    return UnionOutcome(operands, result, solve_ms, seconds * 1e3, warnings)
