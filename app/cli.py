@@ -11,7 +11,7 @@ import uvicorn
 from app.api.operands import upload_options
 from app.api.problems import Problem, status_for
 from app.core.config import get_settings
-from app.geometry.errors import GeometryError
+from app.core.errors import InputError
 from app.geometry.io import UNIT_TO_METRES, resolve_file_type
 from app.geometry.pipeline import solve_bytes
 from app.geometry.spectrum import DEFAULT_K, MAX_K
@@ -46,7 +46,7 @@ def spectrum(
     try:
         options = upload_options(get_settings(), k, units, scale, closed=closed, boundary=boundary)
         solved = solve_bytes(file.read_bytes(), resolve_file_type(file.name, file_type), options, vectors=bool(vectors))
-    except GeometryError as exc:
+    except InputError as exc:
         _fail(status_for(exc), exc.slug, exc.title, str(exc))
     if vectors:
         vectors.write_bytes(solved.npz())

@@ -10,12 +10,13 @@ import json
 
 import numpy as np
 
-from app.geometry.errors import GeometryError, InvalidGeometry
+from app.core.errors import InputError
+from app.geometry.errors import InvalidGeometry
 
 MAX_INDEX = 2**31 - 1  # past any vertex cap, and within every integer type the solvers use
 
 
-def loads(text: str, name: str, error: type[GeometryError]) -> object:
+def loads(text: str, name: str, error: type[InputError]) -> object:
     """The field's JSON value, or ``error`` saying why it is not JSON."""
     try:
         return json.loads(text)
@@ -25,7 +26,7 @@ def loads(text: str, name: str, error: type[GeometryError]) -> object:
         raise error(f"{name} is not valid JSON: {exc}") from None
 
 
-def number_list(value: object, name: str, error: type[GeometryError]) -> np.ndarray:
+def number_list(value: object, name: str, error: type[InputError]) -> np.ndarray:
     """A JSON list of numbers (not booleans, not strings) as float64, or ``error``."""
     if not isinstance(value, list) or not all(_is_number(v) for v in value):
         raise error(f"{name} must be a list of numbers")
@@ -35,7 +36,7 @@ def number_list(value: object, name: str, error: type[GeometryError]) -> np.ndar
         raise error(f"{name} holds an integer too large for a float") from None
 
 
-def index_list(value: object, name: str, error: type[GeometryError]) -> list[int]:
+def index_list(value: object, name: str, error: type[InputError]) -> list[int]:
     """A JSON list of integers in [0, MAX_INDEX], or ``error``."""
     if not isinstance(value, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in value):
         raise error(f"{name} must be a list of integers")

@@ -17,7 +17,7 @@ from app.api import form_json
 from app.api.problems import ProblemError
 from app.api.solver import SolverPool
 from app.core.config import Settings
-from app.geometry.errors import GeometryError
+from app.core.errors import InputError
 from app.geometry.io import resolve_file_type
 from app.geometry.pipeline import SpectrumOptions, SpectrumReport
 from app.inference.spectra import InvalidSpectrum, checked_spectrum
@@ -125,7 +125,7 @@ async def resolve_operands(
     reports = await _solve_all(request, files, options)
     solve_ms = (time.perf_counter() - started) * 1e3
     for source, report in zip(sources, reports, strict=True):
-        if isinstance(report, GeometryError):
+        if isinstance(report, InputError):
             report.args = (f"{source}: {report}",)
         if isinstance(report, BaseException):
             raise report  # the first failing file, in upload order

@@ -13,7 +13,8 @@ from pydantic import BaseModel
 from starlette.exceptions import HTTPException
 from starlette.routing import Match
 
-from app.geometry.errors import GeometryError, UnsupportedFileType
+from app.core.errors import InputError
+from app.geometry.errors import UnsupportedFileType
 from app.retrieval.store import StoreUnavailable
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
@@ -43,7 +44,7 @@ def problem_response(status: int, slug: str, title: str, detail: str) -> JSONRes
     return JSONResponse(body.model_dump(), status_code=status, media_type=PROBLEM_MEDIA_TYPE)
 
 
-def status_for(error: GeometryError) -> int:
+def status_for(error: InputError) -> int:
     """415 for a type outside the allow-list; 422 for everything the file itself got wrong."""
     return 415 if isinstance(error, UnsupportedFileType) else 422
 
@@ -179,8 +180,8 @@ def _allowed_methods(request: Request) -> list[str]:
 def install_problem_handlers(app: FastAPI) -> None:
     """Route every error through the one problem+json shape; none leaks as HTML or plain text."""
 
-    @app.exception_handler(GeometryError)
-    async def _geometry(_: Request, exc: GeometryError) -> JSONResponse:
+    @app.exception_handler(InputError)
+    async def _input(_: Request, exc: InputError) -> JSONResponse:
         return problem_response(status_for(exc), exc.slug, exc.title, str(exc))
 
     @app.exception_handler(RequestValidationError)

@@ -30,7 +30,7 @@ from threadpoolctl import threadpool_limits
 
 from app.api.metrics import SOLVES
 from app.api.problems import ProblemError
-from app.geometry.errors import SolveMemoryExceeded, SolveTimeout
+from app.core.errors import InputError
 from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport, solve_bytes
 
 RETRY_AFTER_SECONDS = 1  # a solve takes ~0.1–0.3 s: a place frees within a second
@@ -81,6 +81,20 @@ def _solve_task(data: bytes, file_type: str, options: SpectrumOptions, vectors: 
         pass
     gc.collect()
     raise SolveMemoryExceeded("the solve needed more memory than a solver worker may use")
+
+
+class SolveTimeout(InputError):
+    """The solve ran past the service's deadline and its worker was stopped."""
+
+    slug = "solve-timeout"
+    title = "Solve ran past its deadline"
+
+
+class SolveMemoryExceeded(InputError):
+    """The solve needed more memory than a solver worker may use."""
+
+    slug = "solve-memory-exceeded"
+    title = "Solve needs too much memory"
 
 
 class SolverPool:

@@ -1,11 +1,13 @@
-"""Input errors raised by the geometry layer.
+"""Input errors raised by the geometry layer: a file that cannot be turned into a spectrum.
 
 Each carries a stable ``slug`` that the API turns into a problem ``type``; the HTTP status
 belongs to the API layer, not here.
 """
 
+from app.core.errors import InputError
 
-class GeometryError(ValueError):
+
+class GeometryError(InputError):
     """Base class: the input cannot be turned into a spectrum, and the reason is the caller's."""
 
     slug = "invalid-geometry"
@@ -63,17 +65,3 @@ class SolverFailure(GeometryError):
 
     slug = "solver-failure"
     title = "Eigen-solver failed on this shape"
-
-
-class SolveTimeout(GeometryError):
-    """The solve ran past the service's deadline and its worker was stopped."""
-
-    slug = "solve-timeout"
-    title = "Solve ran past its deadline"
-
-
-class SolveMemoryExceeded(GeometryError):
-    """The solve needed more memory than a solver worker may use."""
-
-    slug = "solve-memory-exceeded"
-    title = "Solve needs too much memory"

@@ -7,11 +7,11 @@ reported as such instead of producing a confident-looking union of garbage.
 
 import numpy as np
 
-from app.geometry.errors import GeometryError
+from app.core.errors import InputError
 from app.geometry.spectrum import MAX_EIGENVALUE, ORDER_TOLERANCE
 
 
-class InvalidSpectrum(GeometryError):
+class InvalidSpectrum(InputError):
     """A spectrum in a request is not a valid truncated spectrum."""
 
     slug = "invalid-spectrum"

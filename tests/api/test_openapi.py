@@ -10,7 +10,7 @@ from pydantic import TypeAdapter
 
 from app.api.problems import EXAMPLES, FRAMEWORK_PROBLEMS
 from app.core.config import Settings
-from app.geometry.errors import GeometryError
+from app.core.errors import InputError
 from app.main import create_app
 from tests.api.conftest import API_KEY
 
@@ -40,7 +40,7 @@ def test_the_readme_errors_table_names_every_problem_type():
     readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     table = readme[readme.index("### Errors") : readme.index("## Configuration")]
     listed = set(re.findall(r"^\| \d{3} \| `([a-z-]+)` \|", table, re.MULTILINE))
-    raised = {error.slug for error in _subclasses(GeometryError)}
+    raised = {error.slug for error in _subclasses(InputError)}
     documented = {slug for examples in EXAMPLES.values() for slug, _, _ in examples}
     framework = {slug for status, (slug, _) in FRAMEWORK_PROBLEMS.items() if status == 400}
     assert raised | documented | framework <= listed, sorted((raised | documented | framework) - listed)
