@@ -1,0 +1,156 @@
+"""Run the README's API examples against a live service and write what it answered.
+
+    SPECTRAL_UNIONS_API_KEY=change-me make run            # in one shell
+    .venv/bin/python benchmarks/readme_examples.py         # in another
+
+Writes the samples (``spectral-unions samples``) to a temporary folder, sends the README's
+requests with httpx, and replaces the block between ``<!-- examples:begin -->`` and
+``<!-- examples:end -->`` in ``README.md`` with the commands and their answers (long lists cut
+to three values), and ``app/api/examples.json`` (the OpenAPI page's success examples) with the
+answers rounded to three decimals. Run it after the models change, so that no example shows
+what an earlier model said.
+"""
+
+import argparse
+import json
+import tempfile
+from pathlib import Path
+
+import httpx
+
+from app.core.config import Settings
+from app.inference.template import Template
+from app.samples import write_samples
+
+ROOT = Path(__file__).resolve().parents[1]
+README, EXAMPLES = ROOT / "README.md", ROOT / "app" / "api" / "examples.json"
+BEGIN, END = "<!-- examples:begin -->", "<!-- examples:end -->"
+PARTS = ("no_head_neck.ply", "no_left_forearm_hand.ply")
+KEY = "change-me"
+
+
+def rounded(value):
+    """Numbers to three decimals, recursively."""
+    if isinstance(value, float):
+        return round(value, 3)
+    if isinstance(value, list):
+        return [rounded(v) for v in value]
+    if isinstance(value, dict):
+        return {k: rounded(v) for k, v in value.items()}
+    return value
+
+
+def shown(value, cut: int = 3) -> str:
+    """JSON as the README shows it: rounded, lists over ``cut`` items cut to ``cut`` and "…",
+    part coverage cut to four parts."""
+    if isinstance(value, dict):
+        items = list(value.items())
+        tail = ""
+        if len(items) > 8 and all(isinstance(v, float) for _, v in items):  # part coverage
+            items, tail = items[:4], ", …: …"
+        return "{" + ", ".join(f"{json.dumps(k)}: {shown(v, cut)}" for k, v in items) + tail + "}"
+    if isinstance(value, list):
+        if len(value) > cut:
+            return "[" + ", ".join(shown(v, cut) for v in value[:cut]) + ", …]"
+        return "[" + ", ".join(shown(v, cut) for v in value) + "]"
+    return json.dumps(rounded(value), ensure_ascii=False)
+
+
+def files(folder: Path) -> list[tuple[str, tuple[str, bytes, str]]]:
+    return [("files", (name, (folder / name).read_bytes(), "application/octet-stream")) for name in PARTS]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--url", default="http://127.0.0.1:8000")
+    args = parser.parse_args()
+    url = args.url
+    both = "-F files=@no_head_neck.ply -F files=@no_left_forearm_hand.ply"
+    blocks, recorded = [], {}
+    with tempfile.TemporaryDirectory() as scratch, httpx.Client(base_url=url, timeout=120) as client:
+        folder = Path(scratch)
+        write_samples(folder, Template.load(Settings().models_dir))
+
+        def show(command: str, response: httpx.Response, name: str | None = None, text: str | None = None) -> dict:
+            body = response.json() if text is None else None
+            if name:
+                recorded[name] = rounded(body)
+            blocks.append(f"$ {command}\n{text if text is not None else shown(body)}")
+            return body
+
+        part = (folder / PARTS[0]).read_bytes()
+        show(
+            f"curl -s -F file=@{PARTS[0]} '{url}/v1/spectrum?units=m'",
+            client.post("/v1/spectrum", params={"units": "m"}, files={"file": (PARTS[0], part)}),
+            "spectrum",
+        )
+        show(f"curl -s {both} {url}/v1/union", client.post("/v1/union", files=files(folder)), "union")
+        spectra = (folder / "spectra.json").read_text()
+        show(
+            f'curl -s -F "spectra=$(cat spectra.json)" {url}/v1/union',
+            client.post("/v1/union", data={"spectra": spectra}),
+        )
+        localized = client.post("/v1/localize", files=files(folder)).json()
+        recorded["localize"] = rounded({**localized, "vertices": localized["vertices"][:5]})
+        region = {k: localized[k] for k in ("vertices", "area_fraction", "part_coverage", "template_vertices")}
+        show(
+            f"curl -s {both} {url}/v1/localize",
+            httpx.Response(200),
+            text="(the union's fields as above, then:)\n" + shown(region),
+        )
+        ply = client.post("/v1/localize", params={"format": "ply"}, files=files(folder)).content
+        header = ply[: ply.index(b"end_header")].decode().strip()
+        show(f"curl -s {both} '{url}/v1/localize?format=ply' -o covered.ply", httpx.Response(200), text=header)
+        show(
+            f"curl -s {both} '{url}/v1/retrieve?top=3'",
+            client.post("/v1/retrieve", params={"top": 3}, files=files(folder)),
+            "retrieve",
+        )
+        added = show(
+            f"curl -s -H 'X-API-Key: {KEY}' -F label=alice -F file=@body.ply {url}/v1/shapes",
+            client.post(
+                "/v1/shapes",
+                headers={"X-API-Key": KEY},
+                data={"label": "alice"},
+                files={"file": ("body.ply", (folder / "body.ply").read_bytes())},
+            ),
+            "add_shape",
+        )
+        page = client.get("/v1/shapes", params={"offset": 0, "limit": 2}).json()
+        recorded["list_shapes"] = rounded(page)
+        shown_page = shown({**page, "shapes": page["shapes"][:1]})[:-2] + ", …]}"
+        show(f"curl -s '{url}/v1/shapes?offset=0&limit=2'", httpx.Response(200), text=shown_page)
+        deleted = client.delete(f"/v1/shapes/{added['id']}", headers={"X-API-Key": KEY}).status_code
+        status_only = "-s -o /dev/null -w '%{http_code}\\n'"
+        show(
+            f"curl {status_only} -X DELETE -H 'X-API-Key: {KEY}' {url}/v1/shapes/{added['id']}",
+            httpx.Response(200),
+            text=str(deleted),
+        )
+        show(f"curl -s {url}/v1/models", client.get("/v1/models"), "models")
+        show(f"curl -s {url}/healthz", client.get("/healthz"))
+        show(f"curl -s {url}/readyz", client.get("/readyz"))
+        metrics = [
+            line
+            for line in client.get("/metrics").text.splitlines()
+            if line.startswith("spectral_unions_requests_total")
+        ]
+        show(
+            f"curl -s {url}/metrics | grep -E '^spectral_unions_requests_total' | head -3",
+            httpx.Response(200),
+            text="\n".join(metrics[:3]),
+        )
+        show(f"curl -s -F 'spectra=[[1,2,3]]' {url}/v1/union", client.post("/v1/union", data={"spectra": "[[1,2,3]]"}))
+        show(
+            f"curl -s -X DELETE -H 'X-API-Key: wrong' {url}/v1/shapes/x",
+            client.delete("/v1/shapes/x", headers={"X-API-Key": "wrong"}),
+        )
+    text = README.read_text()
+    block = BEGIN + "\n```console\n" + "\n\n".join(blocks) + "\n```\n" + END
+    README.write_text(text[: text.index(BEGIN)] + block + text[text.index(END) + len(END) :])
+    EXAMPLES.write_text(json.dumps(recorded, indent=1, ensure_ascii=False) + "\n")
+    print(f"README.md examples and {EXAMPLES.relative_to(ROOT)} written from {url}")
+
+
+if __name__ == "__main__":
+    main()
