@@ -32,12 +32,12 @@ def loaded_models(request: Request) -> SpectralModels:
 ModelsDep = Annotated[SpectralModels, Depends(loaded_models)]
 
 
-async def open_store(request: Request) -> ShapeStore:
+async def usable_store(request: Request) -> ShapeStore:
     """The ShapeDNA store, opened again if it was down; 503 database-unavailable if it still is."""
     return await request.app.state.resources.require_store()
 
 
-StoreDep = Annotated[ShapeStore, Depends(open_store)]
+StoreDep = Annotated[ShapeStore, Depends(usable_store)]
 
 
 def require_write_key(settings: SettingsDep, x_api_key: Annotated[str | None, Header()] = None) -> None:
