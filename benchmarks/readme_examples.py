@@ -71,12 +71,17 @@ def main() -> None:
         folder = Path(scratch)
         write_samples(folder, Template.load(Settings().models_dir))
 
-        def show(command: str, response: httpx.Response, name: str | None = None, text: str | None = None) -> dict:
-            body = response.json() if text is None else None
+        def show(command: str, response: httpx.Response, name: str | None = None) -> dict:
+            """A JSON answer, shown cut and, under ``name``, recorded for the OpenAPI page."""
+            body = response.json()
             if name:
                 recorded[name] = rounded(body)
-            blocks.append(f"$ {command}\n{text if text is not None else shown(body)}")
+            blocks.append(f"$ {command}\n{shown(body)}")
             return body
+
+        def show_text(command: str, text: str) -> None:
+            """An answer shown as it is (a header, a status code, metrics lines)."""
+            blocks.append(f"$ {command}\n{text}")
 
         part = (folder / PARTS[0]).read_bytes()
         show(
@@ -93,14 +98,10 @@ def main() -> None:
         localized = client.post("/v1/localize", files=files(folder)).json()
         recorded["localize"] = rounded({**localized, "vertices": localized["vertices"][:5]})
         region = {k: localized[k] for k in ("vertices", "area_fraction", "part_coverage", "template_vertices")}
-        show(
-            f"curl -s {both} {url}/v1/localize",
-            httpx.Response(200),
-            text="(the union's fields as above, then:)\n" + shown(region),
-        )
+        show_text(f"curl -s {both} {url}/v1/localize", "(the union's fields as above, then:)\n" + shown(region))
         ply = client.post("/v1/localize", params={"format": "ply"}, files=files(folder)).content
         header = ply[: ply.index(b"end_header")].decode().strip()
-        show(f"curl -s {both} '{url}/v1/localize?format=ply' -o covered.ply", httpx.Response(200), text=header)
+        show_text(f"curl -s {both} '{url}/v1/localize?format=ply' -o covered.ply", header)
         show(
             f"curl -s {both} '{url}/v1/retrieve?top=3'",
             client.post("/v1/retrieve", params={"top": 3}, files=files(folder)),
@@ -119,14 +120,10 @@ def main() -> None:
         page = client.get("/v1/shapes", params={"offset": 0, "limit": 2}).json()
         recorded["list_shapes"] = rounded(page)
         shown_page = shown({**page, "shapes": page["shapes"][:1]})[:-2] + ", …]}"
-        show(f"curl -s '{url}/v1/shapes?offset=0&limit=2'", httpx.Response(200), text=shown_page)
+        show_text(f"curl -s '{url}/v1/shapes?offset=0&limit=2'", shown_page)
         deleted = client.delete(f"/v1/shapes/{added['id']}", headers={"X-API-Key": KEY}).status_code
         status_only = "-s -o /dev/null -w '%{http_code}\\n'"
-        show(
-            f"curl {status_only} -X DELETE -H 'X-API-Key: {KEY}' {url}/v1/shapes/{added['id']}",
-            httpx.Response(200),
-            text=str(deleted),
-        )
+        show_text(f"curl {status_only} -X DELETE -H 'X-API-Key: {KEY}' {url}/v1/shapes/{added['id']}", str(deleted))
         show(f"curl -s {url}/v1/models", client.get("/v1/models"), "models")
         show(f"curl -s {url}/healthz", client.get("/healthz"))
         show(f"curl -s {url}/readyz", client.get("/readyz"))
@@ -135,10 +132,8 @@ def main() -> None:
             for line in client.get("/metrics").text.splitlines()
             if line.startswith("spectral_unions_requests_total")
         ]
-        show(
-            f"curl -s {url}/metrics | grep -E '^spectral_unions_requests_total' | head -3",
-            httpx.Response(200),
-            text="\n".join(metrics[:3]),
+        show_text(
+            f"curl -s {url}/metrics | grep -E '^spectral_unions_requests_total' | head -3", "\n".join(metrics[:3])
         )
         show(f"curl -s -F 'spectra=[[1,2,3]]' {url}/v1/union", client.post("/v1/union", data={"spectra": "[[1,2,3]]"}))
         show(
