@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from training.data.build import _chunks, run_tasks, solve_chunk
+from training.data.workers import chunks, run_tasks, solve_chunk
 
 
 def main() -> None:
@@ -32,14 +32,14 @@ def main() -> None:
     tasks = np.stack([arrays["spectrum_shape"], arrays["spectrum_mask"]], axis=1)
     variants, stored = arrays["spectrum_variant"], arrays["spectra"]
     sample = np.sort(np.random.default_rng(args.seed).choice(len(tasks), size=args.tasks, replace=False))
-    chunks = list(_chunks(sample, preset["chunk"]))
+    batches = list(chunks(sample, preset["chunk"]))
     paths = (str(args.data / "template"), str(args.data / "work/shapes.npy"), str(args.data / "work/masks.npy"))
-    arguments = [(*paths, tasks[c], variants[c], preset["k"]) for c in chunks]
+    arguments = [(*paths, tasks[c], variants[c], preset["k"]) for c in batches]
     results: dict[int, np.ndarray] = {}
     started = time.perf_counter()
     run_tasks(solve_chunk, arguments, results.__setitem__, None, args.workers, "spectra")
     seconds = time.perf_counter() - started
-    computed = np.concatenate([results[i] for i in range(len(chunks))])
+    computed = np.concatenate([results[i] for i in range(len(batches))])
     expected = stored[sample]
     # Relative to each eigenvalue, or to 1e-9 of the spectrum's top one for the λ₁ = 0 of closed
     # shapes (a numerical zero of ~1e-13 is noise, not an eigenvalue to compare).

@@ -5,7 +5,8 @@ from typing import Annotated
 
 import typer
 
-from training.data.build import PRESETS, build_dataset
+from training.data.build import build_dataset
+from training.data.presets import PRESETS
 
 cli = typer.Typer(no_args_is_help=True, add_completion=False)
 

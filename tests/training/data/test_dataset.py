@@ -9,11 +9,13 @@ import pytest
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
 from tests.training.data.synthetic import SyntheticSource, synthetic_template
-from training.data.build import PRESETS, TEST_B_MAX_IOU, build_dataset
+from training.data.build import build_dataset
 from training.data.overlaps import CAMERA, IDENTICAL, NESTED, RESCAN, TEST_C_GROUPS
 from training.data.pairs import AREA_TIE, MIN_GAIN, containment, symmetric_iou
+from training.data.presets import PRESETS
 from training.data.regions import MAX_AREA_FRACTION, MIN_AREA_FRACTION, RegionSampler
 from training.data.spectra import region_mesh
+from training.data.splits import TEST_B_MAX_IOU
 
 PRESET = PRESETS["tiny"]
 

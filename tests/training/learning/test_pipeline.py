@@ -15,7 +15,8 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("onnxscript")
 
 from tests.training.data.synthetic import SyntheticSource  # noqa: E402
-from training.data.build import PRESETS, build_dataset  # noqa: E402
+from training.data.build import build_dataset  # noqa: E402
+from training.data.presets import PRESETS  # noqa: E402
 from training.learning.data import SpectralData  # noqa: E402
 from training.learning.export import session  # noqa: E402
 from training.learning.pipeline import TRAINING_PRESETS, run_pipeline  # noqa: E402
