@@ -7,17 +7,23 @@ chunk is the same whichever worker draws it and in whatever order). Anny's pose 
 (:mod:`training.data.bodies`) use ``[seed, group, identity]``.
 
 Known overlaps, kept because changing a word redraws the rows it feeds and with them every
-committed table (to be given distinct words at the next full rebuild):
+committed table (give every stream its own words at the next full rebuild, e.g. a leading kind
+word before the chunk):
 
 - "candidate" and "triple" chunks share word 1: a candidate chunk's first draw may repeat the
   union of the same chunk's first triple. Harmless: candidates are only offered as Test B union
   types, and one that equals a triple's union has IoU 1 with a seen union, so the novelty filter
   (IoU < 0.8 with every training and triple union) always drops it.
+- NumPy's seed sequence ignores trailing zero words, so a "pair" chunk ``[seed, c, 0]`` is the
+  serial stream ``[seed, c]``: pair chunks 2–8 draw the numbers of the serial streams (chunk 2
+  draws its regions with the numbers "splits" assigns rows to bodies with).
 - ``[seed, chunk, word]`` and anny's ``[seed, group, identity]`` coincide where chunk = group
   and word = identity (pair chunk 0 and the first known man's poses; session chunk 0 and the
-  tenth known man's): the same numbers choose poses in one place and draw regions or camera
-  positions in the other. Unrelated uses, so no measured figure depends on it, but not
-  independent by design.
+  tenth known man's).
+
+In each case the same numbers serve unrelated draws (regions on the template against bodies,
+poses or camera positions), so no measured figure depends on it; but they are not independent
+by design. ``tests/training/data/test_streams.py`` holds the list to exactly these.
 """
 
 import numpy as np
