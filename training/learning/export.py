@@ -2,11 +2,15 @@
 
 Both graphs have a dynamic batch dimension and a fixed opset, and the input and output names
 of :mod:`app.contract`, by which the service (onnxruntime, no torch) feeds and reads them.
+The exporter records on every node the Python stack that made it (file paths and line
+numbers): those are dropped, so that a graph's bytes change only when what it computes does,
+and no path of the machine that trained it ships with it.
 """
 
 from pathlib import Path
 
 import numpy as np
+import onnx
 import onnxruntime as ort
 import torch
 
@@ -15,6 +19,7 @@ from training.learning.localizer_net import Localizer
 from training.learning.union_net import UnionOperator
 
 OPSET = 18
+SOURCE_METADATA = "pkg.torch.onnx.stack_trace"  # per node: where in our Python it was traced
 
 
 def _export(model: torch.nn.Module, example: tuple[torch.Tensor, ...], path: Path, inputs, outputs) -> None:
@@ -33,6 +38,12 @@ def _export(model: torch.nn.Module, example: tuple[torch.Tensor, ...], path: Pat
         dynamo=True,
         verbose=False,
     )
+    graph = onnx.load(str(path))
+    for node in [*graph.graph.node, *(n for function in graph.functions for n in function.node)]:
+        kept = [entry for entry in node.metadata_props if entry.key != SOURCE_METADATA]
+        del node.metadata_props[:]
+        node.metadata_props.extend(kept)
+    onnx.save(graph, str(path))
 
 
 def export_union(model: UnionOperator, path: Path) -> None:

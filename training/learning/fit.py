@@ -1,15 +1,20 @@
-"""What every training run shares: device choice, seeding, schedule, resumable checkpoints.
+"""What every training run shares: device choice, seeding, the loop with its schedule, early
+stopping and resumable checkpoints.
 
+Each trainer (:mod:`training.learning.train_union`, :mod:`training.learning.train_localizer`)
+says only what is its own: how a batch of rows becomes a loss, and how an epoch is validated.
 A checkpoint is a plain dict (weights, optimizer, scheduler, config, epoch, best metric, best
 weights) so that it loads without this package's classes and a killed run resumes exactly.
 """
 
 import random
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 
 def pick_device() -> torch.device:
@@ -22,6 +27,20 @@ def seed_everything(seed: int) -> torch.Generator:
     np.random.seed(seed)
     torch.manual_seed(seed)
     return torch.Generator().manual_seed(seed)
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    """What the loop itself needs; each trainer's settings extend it with their own."""
+
+    epochs: int = 60
+    batch: int = 64
+    learning_rate: float = 1e-3
+    weight_decay: float = 1e-5
+    first_restart: int = 60  # epochs of the first cosine cycle (each next one twice as long)
+    patience: int = 25  # epochs without a better validation metric before stopping
+    clip_norm: float | None = None  # the gradient's largest norm; None: not clipped
+    seed: int = 0
 
 
 def optimizer_and_schedule(
@@ -128,3 +147,66 @@ def is_finished(path: Path, epochs: int, patience: int) -> bool:
     if not path.exists():
         return False
     return not _progress(torch.load(path, map_location="cpu", weights_only=False)).remaining(epochs, patience)
+
+
+@dataclass(frozen=True)
+class Objective:
+    """A trainer's own part of the loop.
+
+    ``batch_loss`` turns a batch of sample indices (a tensor, drawn by the loop from the run's
+    generator) into the loss; ``validate`` scores the model after an epoch, lower is better;
+    ``shown`` is how the progress bar prints that score (e.g. an IoU for its negative).
+    """
+
+    label: str
+    samples: int
+    batch_loss: Callable[[torch.Tensor], torch.Tensor]
+    validate: Callable[[], float]
+    shown: Callable[[float], str]
+
+
+def fit(
+    model: torch.nn.Module,
+    objective: Objective,
+    settings: LoopSettings,
+    checkpoint: Path,
+    run_config: dict,
+    generator: torch.Generator,
+) -> torch.nn.Module:
+    """Train ``model`` in place (or resume its checkpoint) and load its best epoch's weights.
+
+    Every epoch: one pass over a fresh permutation of the samples in batches (the last partial
+    batch dropped), Adam with the warm-restart cosine schedule stepped per batch, the gradient
+    clipped when ``settings.clip_norm`` says so, then validation, a checkpoint, and a stop once
+    validation has not improved for ``settings.patience`` epochs.
+    """
+    optimizer, schedule = optimizer_and_schedule(
+        model, settings.learning_rate, settings.weight_decay, settings.first_restart
+    )
+    progress, best = Progress(), snapshot(model)
+    if checkpoint.exists():
+        progress, best = load_checkpoint(checkpoint, model, optimizer, schedule, generator)
+    device = next(model.parameters()).device
+    steps = max(1, objective.samples // settings.batch)
+    epochs = progress.remaining(settings.epochs, settings.patience)
+    bar = tqdm(epochs, desc=objective.label, unit="epoch", initial=progress.epoch, total=settings.epochs)
+    for epoch in bar:
+        model.train()
+        order = torch.randperm(objective.samples, generator=generator)
+        for step in range(steps):
+            loss = objective.batch_loss(order[step * settings.batch : (step + 1) * settings.batch].to(device))
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            if settings.clip_norm is not None:
+                torch.nn.utils.clip_grad_norm_(model.parameters(), settings.clip_norm)
+            optimizer.step()
+            schedule.step(epoch + (step + 1) / steps)
+        metric = objective.validate()
+        if progress.finish_epoch(epoch, metric):
+            best = snapshot(model)
+        bar.set_postfix(val=objective.shown(metric), best=objective.shown(progress.best_metric))
+        save_checkpoint(checkpoint, model, optimizer, schedule, run_config, progress, best, generator)
+        if progress.stale_epochs >= settings.patience:
+            break
+    model.load_state_dict(best)
+    return model

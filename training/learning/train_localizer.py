@@ -13,20 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from app.geometry.laplacian import mesh_operators
 from app.geometry.spectrum import eigenpairs
 from training.learning.data import PairTable, SpectralData
-from training.learning.fit import (
-    Progress,
-    load_checkpoint,
-    optimizer_and_schedule,
-    pick_device,
-    save_checkpoint,
-    seed_everything,
-    snapshot,
-)
+from training.learning.fit import LoopSettings, Objective, fit, pick_device, seed_everything
 from training.learning.localizer_net import Localizer, LocalizerConfig, feature_statistics
 from training.learning.masks import symmetric_scores
 from training.learning.train_union import memory_rows, predict
@@ -34,15 +25,13 @@ from training.learning.union_net import UnionOperator
 
 
 @dataclass(frozen=True)
-class LocalizerTraining:
+class LocalizerTraining(LoopSettings):
     epochs: int = 40
     batch: int = 128
-    learning_rate: float = 1e-3
     weight_decay: float = 1e-6
     first_restart: int = 10
     patience: int = 10
-    noise: float = 0.01
-    seed: int = 0
+    noise: float = 0.01  # relative noise on the true spectra, redrawn every epoch
 
 
 def template_basis(data: SpectralData, count: int) -> tuple[np.ndarray, np.ndarray]:
@@ -108,44 +97,28 @@ def train_localizer(
     functions, areas = template_basis(data, config.basis or 1)
     mean, std = feature_statistics(spectra)
     model = Localizer(config, functions, mean, std).to(device)
-    optimizer, schedule = optimizer_and_schedule(
-        model, settings.learning_rate, settings.weight_decay, settings.first_restart
-    )
     run_config = {
         "model": config.as_dict(),
         "training": asdict(settings),
         "identities": None if identities is None else [int(i) for i in identities],
     }
-    progress, best = Progress(), snapshot(model)
-    if checkpoint.exists():
-        progress, best = load_checkpoint(checkpoint, model, optimizer, schedule, generator)
     weights = torch.as_tensor(areas / areas.sum(), dtype=torch.float32, device=device)
     mirror = torch.as_tensor(data.template.mirror, device=device)
     validation_spectra = predict(union, validation.a, validation.b, (bodies, validation.shape_a))[0]
     validation_masks = data.masks(validation.mask_union)
-    steps = max(1, len(spectra) // settings.batch)
-    epochs = progress.remaining(settings.epochs, settings.patience)
-    bar = tqdm(epochs, desc="localizer", unit="epoch", initial=progress.epoch, total=settings.epochs)
-    for epoch in bar:
-        model.train()
-        order = torch.randperm(len(spectra), generator=generator).numpy()
-        for step in range(steps):
-            rows = order[step * settings.batch : (step + 1) * settings.batch]
-            x = torch.as_tensor(spectra[rows])
-            jitter = 1 + settings.noise * torch.randn(x.shape, generator=generator)
-            x = torch.where(torch.as_tensor(noisy[rows])[:, None], x * jitter, x).to(device)
-            truth = torch.as_tensor(data.masks(mask_ids[rows]), dtype=torch.float32, device=device)
-            loss = symmetric_loss(model.logits(x), truth, weights, mirror)
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            optimizer.step()
-            schedule.step(epoch + (step + 1) / steps)
+
+    def batch_loss(rows: torch.Tensor) -> torch.Tensor:
+        picked = rows.cpu().numpy()
+        x = torch.as_tensor(spectra[picked])
+        jitter = 1 + settings.noise * torch.randn(x.shape, generator=generator)
+        x = torch.where(torch.as_tensor(noisy[picked])[:, None], x * jitter, x).to(device)
+        truth = torch.as_tensor(data.masks(mask_ids[picked]), dtype=torch.float32, device=device)
+        return symmetric_loss(model.logits(x), truth, weights, mirror)
+
+    def validation_loss() -> float:
         iou, _ = symmetric_scores(localize(model, validation_spectra), validation_masks, areas, data.template.mirror)
-        if progress.finish_epoch(epoch, -float(iou.mean())):
-            best = snapshot(model)
-        bar.set_postfix(val_iou=f"{iou.mean():.4f}", best=f"{-progress.best_metric:.4f}")
-        save_checkpoint(checkpoint, model, optimizer, schedule, run_config, progress, best, generator)
-        if progress.stale_epochs >= settings.patience:
-            break
-    model.load_state_dict(best)
+        return -float(iou.mean())  # lower is better
+
+    objective = Objective("localizer", len(spectra), batch_loss, validation_loss, lambda loss: f"{-loss:.4f}")
+    fit(model, objective, settings, checkpoint, run_config, generator)
     return model.cpu().eval()

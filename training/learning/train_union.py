@@ -17,19 +17,10 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from app.contract import INTERVAL_Z
 from training.learning.data import PairTable, SpectralData
-from training.learning.fit import (
-    Progress,
-    load_checkpoint,
-    optimizer_and_schedule,
-    pick_device,
-    save_checkpoint,
-    seed_everything,
-    snapshot,
-)
+from training.learning.fit import LoopSettings, Objective, fit, pick_device, seed_everything
 from training.learning.union_net import (
     MONOTONE,
     UnionConfig,
@@ -41,18 +32,12 @@ from training.learning.union_net import (
 
 
 @dataclass(frozen=True)
-class UnionTraining:
-    epochs: int = 60
-    batch: int = 64
-    chain_batch: int = 16
-    learning_rate: float = 1e-3
-    weight_decay: float = 1e-5
-    first_restart: int = 60
-    patience: int = 25
-    jitter: float = 0.01
+class UnionTraining(LoopSettings):
+    chain_batch: int = 16  # chains (A ∪ B) ∪ C next to each batch of pairs
+    clip_norm: float | None = 1.0  # the transformers' early steps spike without it
+    jitter: float = 0.01  # relative input noise: a region's spectrum across poses
     dropout: float = 0.0
     loss: str = "absolute"  # a key of CASE_LOSSES
-    seed: int = 0
 
 
 def _tensor(array: np.ndarray, device: torch.device) -> torch.Tensor:
@@ -216,48 +201,27 @@ def train_union(
     train = pairs.rows(memory_rows(data))
     validation = pairs.rows(np.flatnonzero(pairs.split == "validation"))
     model = build_operator(train, config).to(device)
-    optimizer, schedule = optimizer_and_schedule(
-        model, settings.learning_rate, settings.weight_decay, settings.first_restart
-    )
     run_config = {"model": config.as_dict(), "training": asdict(settings)}
-    progress, best = Progress(), snapshot(model)
-    if checkpoint.exists():
-        progress, best = load_checkpoint(checkpoint, model, optimizer, schedule, generator)
     train_tensors = [_tensor(x, device) for x in (train.a, train.b, train.union)]
     memory_bodies = torch.as_tensor(train.shape_a, device=device)
     bodies = (train.shape_a, validation.shape_a)
     chain_rows = np.flatnonzero(~data.triples.test)
     chain_tensors = [_tensor(s[chain_rows], device) for s in data.triples.spectra]
-    steps = max(1, len(train) // settings.batch)
-    epochs = progress.remaining(settings.epochs, settings.patience)
-    bar = tqdm(epochs, desc="union", unit="epoch", initial=progress.epoch, total=settings.epochs)
-    for epoch in bar:
-        model.train()
-        order = torch.randperm(len(train), generator=generator)
-        for step in range(steps):
-            rows = order[step * settings.batch : (step + 1) * settings.batch].to(device)
-            batch = tuple(_jitter(t[rows], settings.jitter, generator) for t in train_tensors[:2]) + (
-                train_tensors[2][rows],
-            )
-            chains = None
-            if len(chain_rows):
-                pick = torch.randint(len(chain_rows), (settings.chain_batch,), generator=generator).to(device)
-                chains = tuple(t[pick] for t in chain_tensors)
-            loss = _losses(model, batch, same_body(memory_bodies, memory_bodies[rows]), chains, settings.loss)
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
-            optimizer.step()
-            schedule.step(epoch + (step + 1) / steps)
-        mean, _ = predict(model, validation.a, validation.b, bodies)
-        mae = float(np.abs(mean - validation.union).mean())
-        if progress.finish_epoch(epoch, mae):
-            best = snapshot(model)
-        bar.set_postfix(val_mae=f"{mae:.3f}", best=f"{progress.best_metric:.3f}")
-        save_checkpoint(checkpoint, model, optimizer, schedule, run_config, progress, best, generator)
-        if progress.stale_epochs >= settings.patience:
-            break
-    model.load_state_dict(best)
+
+    def batch_loss(rows: torch.Tensor) -> torch.Tensor:
+        a, b = (_jitter(t[rows], settings.jitter, generator) for t in train_tensors[:2])
+        batch = (a, b, train_tensors[2][rows])
+        chains = None
+        if len(chain_rows):
+            pick = torch.randint(len(chain_rows), (settings.chain_batch,), generator=generator).to(device)
+            chains = tuple(t[pick] for t in chain_tensors)
+        return _losses(model, batch, same_body(memory_bodies, memory_bodies[rows]), chains, settings.loss)
+
+    def validation_mae() -> float:
+        return float(np.abs(predict(model, validation.a, validation.b, bodies)[0] - validation.union).mean())
+
+    objective = Objective("union", len(train), batch_loss, validation_mae, lambda mae: f"{mae:.3f}")
+    fit(model, objective, settings, checkpoint, run_config, generator)
     calibrate(model, validation.a, validation.b, validation.union, bodies)
     model.cpu().eval()
     return model

@@ -52,9 +52,26 @@ class UnionConfig:
     parametrization: str = MONOTONE  # PRIOR: the prior corrected; MONOTONE: a decrease from min(a, b)
     coincidence_gate: bool = True  # MONOTONE only: the decrease scaled by how far apart the operands are
     width: int = 256  # DeepSets hidden width
-    embedding: int = 32  # transformer token width
+    # The transformers: the paper's (supplementary, "Architecture details"): T_A, which mixes the
+    # two operands' tokens, 8 heads × 6 layers with a feed-forward of 64; T_B, which only
+    # decodes the mixed tokens back to one value each, half as deep (3 layers, feed-forward 32).
+    # Its token width is not given there; 32 (4 per head) is ours, of the size of its feed-forwards.
+    embedding: int = 32
     heads: int = 8
+    mixer_layers: int = 6
+    mixer_feed_forward: int = 64
+    decoder_layers: int = 3
+    decoder_feed_forward: int = 32
+    # The paper's dropout is 0.1; with the memory the correction underfits rather than overfits.
     dropout: float = 0.0
+
+    def __post_init__(self) -> None:
+        assert self.k >= 2 and self.neighbours >= 1, (self.k, self.neighbours)
+        assert self.correction in CORRECTIONS, self.correction
+        assert self.parametrization in (PRIOR, MONOTONE), self.parametrization
+        assert self.embedding % self.heads == 0, "every head needs a whole share of the token"
+        assert min(self.mixer_layers, self.decoder_layers) >= 1
+        assert 0.0 <= self.dropout < 1.0
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -170,8 +187,8 @@ class TransformerCorrection(nn.Module):
         self.position = nn.Parameter(torch.randn(k, d) * 0.02)
         self.operand = nn.Parameter(torch.randn(2, d) * 0.02)  # self, other
         self.distance = nn.Linear(n, d)
-        self.mixer = _encoder(d, config.heads, 6, 64, config.dropout)  # T_A
-        self.decoder = _encoder(d, config.heads, 3, 32, config.dropout)  # T_B
+        self.mixer = _encoder(d, config.heads, config.mixer_layers, config.mixer_feed_forward, config.dropout)  # T_A
+        self.decoder = _encoder(d, config.heads, config.decoder_layers, config.decoder_feed_forward, config.dropout)
         self.rho = nn.Linear(d, 1)
         nn.init.zeros_(self.rho.weight)  # start at the nearest prior
         nn.init.zeros_(self.rho.bias)
