@@ -35,6 +35,9 @@ class Preset:
     derived_test: int = 0
     train_sessions: int = 0
     test_sessions: int = 0
+    # Training rows again with both parts re-meshed (the union stays the mesh's): a scan never
+    # comes in the training meshing, and validation needs such rows to calibrate σ for it.
+    remeshed_train: int = 0
 
 
 PRESETS = {
@@ -61,6 +64,7 @@ PRESETS = {
             derived_test=1,
             train_sessions=3,
             test_sessions=1,
+            remeshed_train=6,
         ),
         Preset(
             name="standard",
@@ -83,6 +87,7 @@ PRESETS = {
             derived_test=30,
             train_sessions=250,
             test_sessions=40,
+            remeshed_train=4_000,
         ),
         Preset(
             name="large",
@@ -105,6 +110,7 @@ PRESETS = {
             derived_test=100,
             train_sessions=1_200,
             test_sessions=150,
+            remeshed_train=20_000,
         ),
     )
 }

@@ -15,7 +15,7 @@ from training.data.overlaps import derived_rows, session_rows
 from training.data.pairs import FULL_COVERAGE, OVERLAP, PARTIAL_UNION, Pair, split_union, symmetric_iou
 from training.data.presets import GROUPS, TRAINING_GROUPS, Preset
 from training.data.regions import RegionSampler
-from training.data.rows import Rows, poses_for
+from training.data.rows import COLUMNS, Rows, poses_for
 from training.data.spectra import CLOUD, MESH, REMESHED
 from training.data.streams import serial_stream
 
@@ -95,7 +95,22 @@ def assign_rows(
     table = _appended(table, _remeshed_copies(writer.take()))
     table["triples"] = np.concatenate([table["triples"], chains.triples])
     table["chains"] = chains.test
+    table = _appended(table, _remeshed_training(table, preset.remeshed_train, serial_stream(seed, "remeshed_train")))
     return table, np.array(writer.masks)
+
+
+def _remeshed_training(table: dict[str, np.ndarray], count: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """``count`` training rows of every kind, drawn uniformly, again with both parts re-meshed.
+
+    They need no new union spectrum (the union stays the mesh's) and only two part spectra
+    each; a re-meshed row of one spectrum twice stays one spectrum twice, whose union is the
+    mesh's: what meshing alone moves a spectrum by, which σ must cover.
+    """
+    train = np.flatnonzero(table["split"] == "train")
+    rows = np.sort(rng.choice(train, size=min(count, len(train)), replace=False))
+    copies = {key: table[key][rows] for key in COLUMNS}
+    copies["variant"] = np.full(len(rows), REMESHED)
+    return copies
 
 
 def _appended(table: dict[str, np.ndarray], rows: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

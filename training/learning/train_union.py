@@ -19,10 +19,12 @@ import numpy as np
 import torch
 
 from app.contract import INTERVAL_Z
+from training.data.spectra import REMESHED
 from training.learning.data import PairTable, SpectralData
 from training.learning.fit import LoopSettings, Objective, fit, pick_device, seed_everything
 from training.learning.union_net import (
     MONOTONE,
+    SIGMA_FLOOR,
     UnionConfig,
     UnionMemory,
     UnionOperator,
@@ -120,8 +122,10 @@ def predict(
 
 DECREASE_WEIGHTS = (0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)  # σ's decrease term, relative to the spread's
 DISAGREEMENT_WEIGHTS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0)  # σ's disagreement term, relative to the spread's
+FLOOR_WEIGHTS = (0.01, 0.02, 0.03, 0.05, 0.08)  # σ's floor, relative to the spread's (0.01: the old σ)
 CALIBRATION_BINS = 5
 COINCIDENT = 0.5  # a validation pair whose coincidence gate is below this is taken for one region twice
+IDENTICAL_BIN, REMESHED_BIN, TWICE_BIN = -1, 0, 1  # then the quintiles of the decrease
 
 
 @torch.no_grad()
@@ -133,50 +137,67 @@ def coincidence(model: UnionOperator, a: np.ndarray, b: np.ndarray) -> np.ndarra
     return model.coincidence(relative_log(a_t, scale), relative_log(b_t, scale))[:, 0].cpu().numpy()
 
 
-def calibration_bins(model: UnionOperator, a: np.ndarray, b: np.ndarray, added: np.ndarray) -> np.ndarray:
-    """(n,) the bin each validation pair's coverage is checked in: pairs taken for one region
-    scanned twice (spectra not identical: those are exact) in bin 0 when there are enough of
-    them, then every other pair by quintiles of how much the operator says the parts add.
-    One spectrum twice goes to -1, in no bin."""
+def calibration_bins(
+    model: UnionOperator, a: np.ndarray, b: np.ndarray, added: np.ndarray, remeshed: np.ndarray
+) -> np.ndarray:
+    """(n,) the bin each validation pair's coverage is checked in.
+
+    Pairs whose parts are in another meshing than their union (``remeshed``) in
+    :data:`REMESHED_BIN`, one spectrum twice among them: its union differs from it by the
+    meshing alone. Of the rest, one spectrum twice is exact and in no bin
+    (:data:`IDENTICAL_BIN`); pairs taken for one region scanned twice in :data:`TWICE_BIN` when
+    there are enough of them; every other pair by quintiles of how much the operator says the
+    parts add. A bin with too few pairs to judge a 90 % coverage by is merged into the quintiles.
+    """
     gate = coincidence(model, a, b)
-    identical = (a == b).all(1)
-    twice = (gate < COINCIDENT) & ~identical
+    identical = (a == b).all(1) & ~remeshed
+    if remeshed.sum() < 2 * CALIBRATION_BINS:
+        remeshed = np.zeros_like(remeshed)
+    twice = (gate < COINCIDENT) & ~identical & ~remeshed
     if twice.sum() < 2 * CALIBRATION_BINS:
         twice[:] = False
-    apart = ~twice & ~identical
+    apart = ~twice & ~identical & ~remeshed
     edges = np.quantile(added[apart], np.linspace(0, 1, CALIBRATION_BINS + 1)[1:-1]) if apart.any() else []
-    bins = 1 + np.searchsorted(edges, added)
-    return np.where(identical, -1, np.where(twice, 0, bins))
+    bins = TWICE_BIN + 1 + np.searchsorted(edges, added)
+    return np.select([identical, remeshed, twice], [IDENTICAL_BIN, REMESHED_BIN, TWICE_BIN], default=bins)
 
 
 def calibrate(
-    model: UnionOperator, a: np.ndarray, b: np.ndarray, union: np.ndarray, bodies: tuple[np.ndarray, np.ndarray]
-) -> tuple[float, float, float]:
-    """Fit σ's three weights so that μ ± z·σ holds 90 % of the validation eigenvalues, and as
-    evenly as it can across pairs that add little and pairs that add much, and pairs taken for
-    one region scanned twice.
+    model: UnionOperator,
+    a: np.ndarray,
+    b: np.ndarray,
+    union: np.ndarray,
+    remeshed: np.ndarray,
+    bodies: tuple[np.ndarray, np.ndarray],
+) -> tuple[float, float, float, float]:
+    """Fit σ's four weights so that μ ± z·σ holds 90 % of the validation eigenvalues, and as
+    evenly as it can across the bins of :func:`calibration_bins`: re-meshed pairs, pairs taken
+    for one region scanned twice, pairs that add little and pairs that add much.
 
-    For each relative weight of the decrease and disagreement terms the common factor is the
-    one that covers 90 % overall; the weights kept are those whose worst coverage over the bins
-    of :func:`calibration_bins` is nearest 90 %. Returns (spread, decrease, disagreement) weights.
+    For each relative weight of the floor, decrease and disagreement terms the common factor is
+    the one that covers 90 % overall; the weights kept are those whose worst coverage over the
+    bins is nearest 90 %. ``remeshed`` flags the pairs whose parts are in another meshing than
+    their union. Returns the (spread, floor, decrease, disagreement) weights.
     """
     parts = []
-    for weights in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)):
+    for weights in np.eye(4):
         model.set_sigma_weights(*weights)
         mean, sigma = predict(model, a, b, bodies)
         parts.append(sigma)
     error = np.abs(mean - union)
-    bins = calibration_bins(model, a, b, parts[1].mean(1) / np.maximum(np.abs(mean).mean(1), 1e-12))
+    added = parts[2].mean(1) / np.maximum(np.abs(mean).mean(1), 1e-12)
+    bins = calibration_bins(model, a, b, added, remeshed)
     monotone = model.config.parametrization == MONOTONE
-    best = (np.inf, 1.0, 0.0, 0.0)
-    for weight in DECREASE_WEIGHTS if monotone else (0.0,):
-        for other in DISAGREEMENT_WEIGHTS if model.gated else (0.0,):
-            sigma = np.maximum(parts[0] + weight * parts[1] + other * parts[2], 1e-12)
-            factor = float(np.quantile(error / sigma, 0.9) / INTERVAL_Z)
-            covered = error <= INTERVAL_Z * factor * sigma
-            worst = max(abs(covered[bins == i].mean() - 0.9) for i in np.unique(bins[bins >= 0]))
-            if worst < best[0]:
-                best = (worst, factor, factor * weight, factor * other)
+    best = (np.inf, 1.0, SIGMA_FLOOR, 0.0, 0.0)
+    for floor in FLOOR_WEIGHTS:
+        for weight in DECREASE_WEIGHTS if monotone else (0.0,):
+            for other in DISAGREEMENT_WEIGHTS if model.gated else (0.0,):
+                sigma = np.maximum(parts[0] + floor * parts[1] + weight * parts[2] + other * parts[3], 1e-12)
+                factor = float(np.quantile(error / sigma, 0.9) / INTERVAL_Z)
+                covered = error <= INTERVAL_Z * factor * sigma
+                worst = max(abs(covered[bins == i].mean() - 0.9) for i in np.unique(bins[bins != IDENTICAL_BIN]))
+                if worst < best[0]:
+                    best = (worst, factor, factor * floor, factor * weight, factor * other)
     model.set_sigma_weights(*best[1:])
     return best[1:]
 
@@ -222,6 +243,6 @@ def train_union(
 
     objective = Objective("union", len(train), batch_loss, validation_mae, lambda mae: f"{mae:.3f}")
     fit(model, objective, settings, checkpoint, run_config, generator)
-    calibrate(model, validation.a, validation.b, validation.union, bodies)
+    calibrate(model, validation.a, validation.b, validation.union, validation.variant == REMESHED, bodies)
     model.cpu().eval()
     return model

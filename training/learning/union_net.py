@@ -36,7 +36,7 @@ import torch
 from torch import Tensor, nn
 
 EPSILON = 1e-3  # keeps the zero λ₁ of a closed (full-body) union finite in log space
-SIGMA_FLOOR = 1e-2  # the smallest relative σ (the pose noise floor is ~2 %)
+SIGMA_FLOOR = 1e-2  # the smallest relative σ before calibration (the pose noise floor is ~2 %)
 SHARPNESS = 20.0  # of the softplus that turns the monotone parametrization's signal into a decrease
 # The coincidence gate's starting width τ in z (RMS over the spectrum): a re-scan of one region
 # differs by ~1–2 % (the pose noise floor), two different parts by tens of per cent. Learned.
@@ -231,6 +231,7 @@ class UnionOperator(nn.Module):
             self.log_gate_width = nn.Parameter(torch.tensor(math.log(GATE_WIDTH)))
         # Interval calibration weights, fitted on validation data after training.
         self.register_buffer("sigma_scale", torch.ones(()))
+        self.register_buffer("sigma_floor", torch.full((), SIGMA_FLOOR))
         self.register_buffer("sigma_decrease", torch.zeros(()))
         self.register_buffer("sigma_disagreement", torch.zeros(()))
 
@@ -289,9 +290,10 @@ class UnionOperator(nn.Module):
         return floor - decrease, decrease
 
     @torch.no_grad()
-    def set_sigma_weights(self, spread: float, decrease: float, disagreement: float) -> None:
-        """The weights of σ's three terms (:meth:`sigma`), as the calibration fits them."""
+    def set_sigma_weights(self, spread: float, floor: float, decrease: float, disagreement: float) -> None:
+        """The weights of σ's terms (:meth:`sigma`), as the calibration fits them."""
         self.sigma_scale.fill_(spread)
+        self.sigma_floor.fill_(floor)
         self.sigma_decrease.fill_(decrease)
         self.sigma_disagreement.fill_(disagreement)
 
@@ -309,13 +311,16 @@ class UnionOperator(nn.Module):
         itself or with a part containing it. Two scans of one region (the gate near 0) differ by
         their pose and meshing, and the union is known no better than they agree: the third term
         is their difference in z at each eigenvalue, times 1 − gate (0 for parts the gate takes
-        for different ones, and for one spectrum twice, which is exact). The weights are fitted
-        on validation data to a calibrated interval (``sigma_scale`` for the spread,
-        ``sigma_decrease`` for the decrease, ``sigma_disagreement`` for the third). A learned σ
+        for different ones, and for one spectrum twice). The floor is what no pair escapes: a
+        spectrum is one meshing's, and a scan's meshing is never the one its union's spectrum is
+        taken on, so even one spectrum twice is its union only up to the meshing (a few per
+        cent, growing with the index). The weights are fitted on validation data to a calibrated
+        interval (``sigma_scale`` for the spread, ``sigma_floor``, ``sigma_decrease`` for the
+        decrease, ``sigma_disagreement`` for the third). A learned σ
         head, trained by Gaussian likelihood next to the mean, cost the mean a tenth of its
         accuracy (validation mae 5.1 → 5.5) and diverged on chains.
         """
         spread = (transferred - relative_log(union, 1.0)[:, None]).pow(2).mean(1).sqrt()
-        relative = (spread + SIGMA_FLOOR) * self.sigma_scale + decrease * self.sigma_decrease
+        relative = spread * self.sigma_scale + self.sigma_floor + decrease * self.sigma_decrease
         relative = relative + disagreement * self.sigma_disagreement
         return relative * (union + EPSILON)

@@ -223,3 +223,18 @@ def test_camera_rows_and_test_c_chains_are_unions_of_views(data, built):
         views = [unpack(data, m) for m in chain[1:6]]
         for length, union in enumerate(chain[6:], start=2):
             np.testing.assert_array_equal(unpack(data, union), np.any(views[:length], axis=0))
+
+
+def test_remeshed_training_rows_repeat_mesh_training_rows_with_re_meshed_parts(data):
+    remeshed = np.flatnonzero((data["split"] == "train") & (data["variant"] == "remeshed"))
+    assert len(remeshed) == PRESET.remeshed_train
+    mesh = np.flatnonzero((data["split"] == "train") & (data["variant"] == "mesh"))
+    columns = ("group", "scenario", "shape_a", "shape_b", "mask_a", "mask_b", "mask_union")
+    originals = {tuple(data[c][row] for c in columns): row for row in mesh}
+    spectra = data["spectra"]
+    for row in remeshed:
+        original = originals[tuple(data[c][row] for c in columns)]  # the same pair, on the same bodies
+        assert data["spec_union"][row] == data["spec_union"][original]  # the union stays the mesh's
+        a, b = spectra[data["spec_a"][row]], spectra[data["spec_a"][original]]
+        assert data["spec_a"][row] != data["spec_a"][original]
+        assert 0 < np.max(np.abs(a - b) / b) < 0.5  # another meshing of the same surface

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from training.data.streams import CHUNKED, SERIAL, chunk_stream, serial_stream
+from training.data.streams import CHUNKED, LATER, SERIAL, chunk_stream, serial_stream
 
 CHUNKS = 64
 
@@ -13,7 +13,7 @@ def _first_draws(generator: np.random.Generator) -> tuple[float, ...]:
 
 def _overlaps(seed: int) -> set[tuple[str, str]]:
     """Every pair of (name, chunk) streams, serial ones included, that draw the same numbers."""
-    streams = {f"serial {name}": serial_stream(seed, name) for name in SERIAL}
+    streams = {f"serial {name}": serial_stream(seed, name) for name in (*SERIAL, *LATER)}
     streams |= {f"{name} {chunk}": chunk_stream(seed, name, chunk) for name in CHUNKED for chunk in range(CHUNKS)}
     seen: dict[tuple[float, ...], str] = {}
     found = set()
@@ -33,7 +33,7 @@ def test_only_the_overlaps_streams_py_documents_exist():
 
 
 def test_another_build_seed_draws_other_numbers():
-    for name in SERIAL:
+    for name in (*SERIAL, *LATER):
         assert _first_draws(serial_stream(0, name)) != _first_draws(serial_stream(1, name))
     for name in CHUNKED:
         assert _first_draws(chunk_stream(0, name, 3)) != _first_draws(chunk_stream(1, name, 3))

@@ -179,11 +179,18 @@ def test_localizer_basis_head_is_small_and_maps_to_vertices():
     assert trainable < 1_000_000  # the paper's head alone is ~36 M weights
 
 
-def test_calibration_covers_ninety_percent_and_bins_pairs_taken_for_one_region_apart():
+def test_calibration_covers_ninety_percent_and_bins_pairs_by_what_makes_them_uncertain():
     """σ's weights make μ ± 1.645σ hold 90 % of the calibration eigenvalues; one spectrum twice
-    is in no bin (it is exact), a re-scan 1 % apart is in the one-region bin, different parts in
-    the others."""
-    from training.learning.train_union import calibrate, calibration_bins
+    is in no bin (it is exact) unless its parts are re-meshed (then its union differs by the
+    meshing), re-meshed pairs have their own bin, a re-scan 1 % apart is in the one-region bin,
+    different parts in the others."""
+    from training.learning.train_union import (
+        IDENTICAL_BIN,
+        REMESHED_BIN,
+        TWICE_BIN,
+        calibrate,
+        calibration_bins,
+    )
 
     model = operator("deepsets")
     a = spectra(300, 40)
@@ -192,12 +199,19 @@ def test_calibration_covers_ninety_percent_and_bins_pairs_taken_for_one_region_a
         mean, _ = model(a, b)
     noise = 1 + 0.05 * torch.randn(mean.shape, generator=torch.Generator().manual_seed(0))
     truth = (mean * noise).numpy()
+    remeshed = np.zeros(300, bool)
+    remeshed[::10] = True  # ten of the identical pairs, ten re-scans, ten different pairs
     bodies = (np.arange(50) + 1000, np.arange(300))  # no memory row is a calibration pair's body
-    weights = calibrate(model, a.numpy(), b.numpy(), truth, bodies)
-    assert all(w >= 0 for w in weights) and weights[0] > 0
+    weights = calibrate(model, a.numpy(), b.numpy(), truth, remeshed, bodies)
+    assert len(weights) == 4 and all(w >= 0 for w in weights) and weights[0] > 0 and weights[1] > 0
     with torch.no_grad():
         mean, sigma = model(a, b)
     covered = np.abs(mean.numpy() - truth) <= 1.6449 * sigma.numpy()
     assert abs(covered.mean() - 0.9) < 0.01
-    bins = calibration_bins(model, a.numpy(), b.numpy(), np.linspace(0, 1, 300))
-    assert (bins[:100] == -1).all() and (bins[100:200] == 0).all() and (bins[200:] >= 1).all()
+    bins = calibration_bins(model, a.numpy(), b.numpy(), np.linspace(0, 1, 300), remeshed)
+    assert (bins[remeshed] == REMESHED_BIN).all()
+    assert (bins[:100][~remeshed[:100]] == IDENTICAL_BIN).all()
+    assert (bins[100:200][~remeshed[100:200]] == TWICE_BIN).all()
+    assert (bins[200:][~remeshed[200:]] > TWICE_BIN).all()
+    too_few = calibration_bins(model, a.numpy(), b.numpy(), np.linspace(0, 1, 300), remeshed & (np.arange(300) < 30))
+    assert not (too_few == REMESHED_BIN).any()
