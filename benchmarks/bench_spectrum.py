@@ -1,11 +1,15 @@
-"""Spectrum engine speed against LaPy, end to end (assembly + solve), on anny bodies.
+"""Spectrum engine speed against LaPy's default and its strongest configuration, end to end.
 
 Run: ``python benchmarks/bench_spectrum.py`` (needs ``pip install -e '.[train,dev]'`` for
-anny, fast-simplification and LaPy). Prints median-of-N milliseconds for closed bodies of
-~5 k, ~13 k and ~53 k vertices and an ~8 k-vertex Dirichlet region, k = 20 and 30, our
-engine and LaPy side by side, and how far our eigenvalues are from a plain SciPy solve of the
-same matrices. LaPy has no Dirichlet option, so on the region it solves the Neumann problem
-(the same matrix sizes and the same work).
+anny, fast-simplification, LaPy and cholespy). Prints, as a Markdown table, median-of-N
+milliseconds on closed anny bodies of ~5 k and ~13 k vertices (and ~53 k with ``--large``) and
+an ~8 k-vertex Dirichlet region, at k = 20, 100 and 200: our engine split into assembly (the
+intrinsic-Delaunay Laplacian), factorization (the shifted LDLᵀ) and iteration (ARPACK, by
+difference from the total), LaPy with SciPy's SuperLU (its default) and LaPy with CHOLMOD
+(``use_cholmod=True``, through the cholespy wheel), each assembly and solve together, in one
+run on one machine; and how far our eigenvalues are from a plain SciPy solve of the same
+matrices. LaPy has no Dirichlet option, so on the region it solves the Neumann problem (the
+same matrix sizes and the same work).
 """
 
 import argparse
@@ -21,7 +25,7 @@ import trimesh
 
 from app.geometry.laplacian import mesh_operators
 from app.geometry.shapes import Mesh
-from app.geometry.spectrum import eigenvalues, shift_for
+from app.geometry.spectrum import eigenvalues, shift_for, shift_invert
 from app.geometry.topology import boundary_vertex_mask, drop_unreferenced, largest_component
 
 
@@ -35,22 +39,24 @@ def anny_body() -> Mesh:
     return Mesh(*drop_unreferenced(vertices, faces))
 
 
-def bodies() -> dict[str, tuple[Mesh, np.ndarray | None]]:
+def bodies(large: bool) -> dict[str, tuple[Mesh, np.ndarray | None]]:
     """The benchmark shapes, each with its Dirichlet vertices (None = closed)."""
     body = anny_body()
-    fine = trimesh.Trimesh(body.vertices, body.faces, process=False).subdivide()
     coarse_v, coarse_f = fast_simplification.simplify(body.vertices, body.faces, target_reduction=0.62)
     # The upper body above the hips: one region with a boundary, ~8 k vertices.
     height = body.vertices[:, 2]
     keep = body.faces[height[body.faces].min(axis=1) > np.quantile(height, 0.4)]
     region_faces, _ = largest_component(body.vertices, keep)
     region = Mesh(*drop_unreferenced(body.vertices, region_faces))
-    return {
+    shapes = {
         "closed body, decimated": (Mesh(coarse_v.astype(np.float64), coarse_f.astype(np.int64)), None),
         "closed body": (body, None),
-        "closed body, subdivided": (Mesh(np.asarray(fine.vertices), np.asarray(fine.faces)), None),
         "Dirichlet region": (region, boundary_vertex_mask(region.faces, len(region.vertices))),
     }
+    if large:
+        fine = trimesh.Trimesh(body.vertices, body.faces, process=False).subdivide()
+        shapes["closed body, subdivided"] = (Mesh(np.asarray(fine.vertices), np.asarray(fine.faces)), None)
+    return shapes
 
 
 def median_ms(run: Callable[[], object], repeats: int) -> float:
@@ -78,39 +84,42 @@ def relative_deviation(values: np.ndarray, reference: np.ndarray) -> float:
 
 
 def measure(mesh: Mesh, fixed: np.ndarray | None, k: int, repeats: int) -> dict[str, float]:
-    """Medians in ms for our engine and LaPy, and our deviation from plain SciPy."""
+    """Medians in ms for our engine's steps and LaPy's two configurations, and our deviation
+    from plain SciPy."""
     v, f = mesh.vertices, mesh.faces
     operators = mesh_operators(v, f)
-    solver = lapy.Solver(lapy.TriaMesh(v, f))
-    return {
-        "ours_asm": median_ms(lambda: mesh_operators(v, f), repeats),
-        "ours_solve": median_ms(lambda: eigenvalues(operators, k, fixed), repeats),
-        "ours_total": median_ms(lambda: eigenvalues(mesh_operators(v, f), k, fixed), repeats),
-        "lapy_asm": median_ms(lambda: lapy.Solver(lapy.TriaMesh(v, f)), repeats),
-        "lapy_solve": median_ms(lambda: solver.eigs(k), repeats),
-        "lapy_total": median_ms(lambda: lapy.Solver(lapy.TriaMesh(v, f)).eigs(k), repeats),
-        "deviation": relative_deviation(eigenvalues(operators, k, fixed), scipy_reference(mesh, fixed, k)),
+    ours = {
+        "assembly": median_ms(lambda: mesh_operators(v, f), repeats),
+        "factorization": median_ms(lambda: shift_invert(operators, k, fixed), repeats),
+        "total": median_ms(lambda: eigenvalues(mesh_operators(v, f), k, fixed), repeats),
     }
+    ours["iteration"] = ours["total"] - ours["assembly"] - ours["factorization"]
+    lapy_superlu = median_ms(lambda: lapy.Solver(lapy.TriaMesh(v, f)).eigs(k), repeats)
+    lapy_cholmod = median_ms(lambda: lapy.Solver(lapy.TriaMesh(v, f), use_cholmod=True).eigs(k), repeats)
+    deviation = relative_deviation(eigenvalues(operators, k, fixed), scipy_reference(mesh, fixed, k))
+    return {**ours, "lapy_superlu": lapy_superlu, "lapy_cholmod": lapy_cholmod, "deviation": deviation}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--k", type=int, nargs="+", default=[20, 100, 200])
+    parser.add_argument("--large", action="store_true", help="also the ~53 k-vertex subdivided body")
     args = parser.parse_args()
-    header = (
-        f"{'shape':<26}{'n':>7}{'k':>4} | {'ours asm':>9}{'solve':>8}{'total':>8} | "
-        f"{'LaPy asm':>9}{'solve':>8}{'total':>8} | {'speed-up':>8} | {'max rel. dev.':>13}"
+    print(
+        "| shape | n | k | ours: assembly | factorization | iteration | total | LaPy SuperLU | LaPy CHOLMOD "
+        "| ×SuperLU | ×CHOLMOD | max rel. dev. from SciPy |"
     )
-    print(header)
-    print("-" * len(header))
-    for name, (mesh, fixed) in bodies().items():
-        for k in (20, 30):
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for name, (mesh, fixed) in bodies(args.large).items():
+        for k in args.k:
             r = measure(mesh, fixed, k, args.repeats)
             print(
-                f"{name:<26}{len(mesh.vertices):>7}{k:>4} | "
-                f"{r['ours_asm']:>9.1f}{r['ours_solve']:>8.1f}{r['ours_total']:>8.1f} | "
-                f"{r['lapy_asm']:>9.1f}{r['lapy_solve']:>8.1f}{r['lapy_total']:>8.1f} | "
-                f"{r['lapy_total'] / r['ours_total']:>7.2f}x | {r['deviation']:>13.1e}"
+                f"| {name} | {len(mesh.vertices)} | {k} | {r['assembly']:.0f} | {r['factorization']:.0f} "
+                f"| {r['iteration']:.0f} | {r['total']:.0f} | {r['lapy_superlu']:.0f} | {r['lapy_cholmod']:.0f} "
+                f"| {r['lapy_superlu'] / r['total']:.2f} | {r['lapy_cholmod'] / r['total']:.2f} "
+                f"| {r['deviation']:.1e} |",
+                flush=True,
             )
 
 

@@ -74,20 +74,9 @@ def eigenpairs(
     SolverFailure
         When the factorization or ARPACK fails (a pathological shape).
     """
-    stiffness, mass = operators
-    diagonal = mass.diagonal()
-    free = np.ones(len(diagonal), dtype=bool) if fixed is None else ~fixed
-    diagonal = diagonal[free]
-    if diagonal.min() <= 0:
-        raise SolverFailure("a vertex has no area (zero lumped mass)")
-    n = len(diagonal)
-    if not 1 <= k < n:
-        raise SolverFailure(f"k must lie in [1, {n - 1}] for {n} free vertices, got {k}")
-    inverse_root = 1 / np.sqrt(diagonal)
-    sigma = _shift(diagonal)
+    inverse, sigma, inverse_root = shift_invert(operators, k, fixed)
+    n = inverse.shape[0]
     try:
-        factor = qdldl.Solver(_shifted_upper(stiffness.tocsr(), free, inverse_root, sigma), upper=True)
-        inverse = sla.LinearOperator((n, n), matvec=factor.solve, dtype=np.float64)
         start = np.random.default_rng(0).standard_normal(n)
         # In shift-invert mode with OPinv given, eigsh reads only the shape and dtype of its
         # first argument: C itself is never multiplied, so it is never assembled.
@@ -110,6 +99,33 @@ def eigenpairs(
         return values[order], None
     # x = M^-1/2 y turns orthonormal eigenvectors of C into M-orthonormal ones of (S, M).
     return values[order], inverse_root[:, None] * standard_vectors[:, order]
+
+
+def shift_invert(
+    operators: Operators, k: int, fixed: np.ndarray | None = None
+) -> tuple[sla.LinearOperator, float, np.ndarray]:
+    """The factorized (C − σI)⁻¹ of the free vertices, C = M^-1/2 S M^-1/2, with σ and M^-1/2.
+
+    The one sparse factorization every iteration of :func:`eigenpairs` reuses (its own step, so
+    that a benchmark can time it apart from the iteration). Raises :class:`SolverFailure` for a
+    vertex without area, a ``k`` the free vertices cannot hold, or a failed factorization.
+    """
+    stiffness, mass = operators
+    diagonal = mass.diagonal()
+    free = np.ones(len(diagonal), dtype=bool) if fixed is None else ~fixed
+    diagonal = diagonal[free]
+    if diagonal.min() <= 0:
+        raise SolverFailure("a vertex has no area (zero lumped mass)")
+    n = len(diagonal)
+    if not 1 <= k < n:
+        raise SolverFailure(f"k must lie in [1, {n - 1}] for {n} free vertices, got {k}")
+    inverse_root = 1 / np.sqrt(diagonal)
+    sigma = _shift(diagonal)
+    try:
+        factor = qdldl.Solver(_shifted_upper(stiffness.tocsr(), free, inverse_root, sigma), upper=True)
+    except ValueError as exc:
+        raise SolverFailure(f"the eigen-solver failed on this shape: {exc}") from exc
+    return sla.LinearOperator((n, n), matvec=factor.solve, dtype=np.float64), sigma, inverse_root
 
 
 def _require_a_spectrum(values: np.ndarray) -> None:
