@@ -57,6 +57,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             app.state.ready = False
             solver.close()
+            await anyio.to_thread.run_sync(resources.close)
 
     app = FastAPI(
         title="spectral-unions",

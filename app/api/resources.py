@@ -48,6 +48,11 @@ class Resources:
         except StoreUnavailable as exc:
             self._store, self.store_problem = None, str(exc)
 
+    def close(self) -> None:
+        """Release what the store holds open (PostgreSQL's idle connections)."""
+        if self._store is not None:
+            self._store.close()
+
     def require_models(self) -> SpectralModels:
         if self.models is None:
             retry = {"Retry-After": RETRY_AFTER_UNAVAILABLE}

@@ -61,6 +61,7 @@ class ShapeStore(Protocol):
     def delete(self, shape_id: str) -> bool: ...
     def nearest(self, spectrum: np.ndarray, top: int) -> list[Match]: ...
     def ping(self) -> None: ...
+    def close(self) -> None: ...
 
 
 class SQLiteStore:
@@ -96,6 +97,9 @@ class SQLiteStore:
     def ping(self) -> None:
         with self._connect() as connection:
             connection.execute("SELECT 1 FROM shapes LIMIT 1")
+
+    def close(self) -> None:
+        """Nothing held open: every operation has its own short-lived connection."""
 
     def add(self, label: str, spectrum: np.ndarray, source: str) -> ShapeRecord:
         record = ShapeRecord(

@@ -50,3 +50,30 @@ def test_seed_fills_only_an_empty_store(tmp_path, request):
     assert first.count() == 4
     again = open_store(tmp_path / "s.sqlite", None, tmp_path)
     assert again.count() == 4
+
+
+def test_postgres_reuses_connections_across_a_server_restart(tmp_path):
+    """Idle connections kept for reuse die with the server: the next call after a restart must
+    find that out and reconnect, not fail; a call while the server is down is unavailable."""
+    from app.retrieval.store import StoreUnavailable
+    from tests.postgres import ThrowawayPostgres
+
+    try:
+        server = ThrowawayPostgres()
+    except FileNotFoundError as exc:
+        pytest.skip(str(exc))
+    server.start()
+    try:
+        store = open_store(tmp_path / "unused.sqlite", server.url, tmp_path)
+        store.add("someone", spectra(1, 3)[0], "test")  # leaves an idle connection behind
+        server.stop()
+        server.start()
+        assert store.count() == 1  # the dead idle connection was replaced, no error
+        server.stop()
+        with pytest.raises(StoreUnavailable):
+            store.count()
+        server.start()
+        assert store.count() == 1
+        store.close()
+    finally:
+        server.remove()
