@@ -40,6 +40,9 @@ class UnionTraining(LoopSettings):
     jitter: float = 0.01  # relative input noise: a region's spectrum across poses
     dropout: float = 0.0
     loss: str = "absolute"  # a key of CASE_LOSSES
+    # σ's floor, relative to the spread's weight, as the calibration may choose it: the served
+    # models keep the fixed 0.01; a grid lets validation re-meshed rows (if any) set it.
+    sigma_floors: tuple[float, ...] = (SIGMA_FLOOR,)
 
 
 def _tensor(array: np.ndarray, device: torch.device) -> torch.Tensor:
@@ -122,7 +125,7 @@ def predict(
 
 DECREASE_WEIGHTS = (0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)  # σ's decrease term, relative to the spread's
 DISAGREEMENT_WEIGHTS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0)  # σ's disagreement term, relative to the spread's
-FLOOR_WEIGHTS = (0.01, 0.02, 0.03, 0.05, 0.08)  # σ's floor, relative to the spread's (0.01: the old σ)
+FLOOR_GRID = (0.01, 0.02, 0.03, 0.05, 0.08)  # σ's floor relative to the spread's, when calibrated (0.01: fixed)
 CALIBRATION_BINS = 5
 COINCIDENT = 0.5  # a validation pair whose coincidence gate is below this is taken for one region twice
 IDENTICAL_BIN, REMESHED_BIN, TWICE_BIN = -1, 0, 1  # then the quintiles of the decrease
@@ -169,15 +172,16 @@ def calibrate(
     union: np.ndarray,
     remeshed: np.ndarray,
     bodies: tuple[np.ndarray, np.ndarray],
+    floors: tuple[float, ...] = (SIGMA_FLOOR,),
 ) -> tuple[float, float, float, float]:
     """Fit σ's four weights so that μ ± z·σ holds 90 % of the validation eigenvalues, and as
     evenly as it can across the bins of :func:`calibration_bins`: re-meshed pairs, pairs taken
     for one region scanned twice, pairs that add little and pairs that add much.
 
-    For each relative weight of the floor, decrease and disagreement terms the common factor is
-    the one that covers 90 % overall; the weights kept are those whose worst coverage over the
-    bins is nearest 90 %. ``remeshed`` flags the pairs whose parts are in another meshing than
-    their union. Returns the (spread, floor, decrease, disagreement) weights.
+    For each relative weight of the floor (of ``floors``), decrease and disagreement terms the
+    common factor is the one that covers 90 % overall; the weights kept are those whose worst
+    coverage over the bins is nearest 90 %. ``remeshed`` flags the pairs whose parts are in
+    another meshing than their union. Returns the (spread, floor, decrease, disagreement) weights.
     """
     parts = []
     for weights in np.eye(4):
@@ -189,7 +193,7 @@ def calibrate(
     bins = calibration_bins(model, a, b, added, remeshed)
     monotone = model.config.parametrization == MONOTONE
     best = (np.inf, 1.0, SIGMA_FLOOR, 0.0, 0.0)
-    for floor in FLOOR_WEIGHTS:
+    for floor in floors:
         for weight in DECREASE_WEIGHTS if monotone else (0.0,):
             for other in DISAGREEMENT_WEIGHTS if model.gated else (0.0,):
                 sigma = np.maximum(parts[0] + floor * parts[1] + weight * parts[2] + other * parts[3], 1e-12)
@@ -243,6 +247,7 @@ def train_union(
 
     objective = Objective("union", len(train), batch_loss, validation_mae, lambda mae: f"{mae:.3f}")
     fit(model, objective, settings, checkpoint, run_config, generator)
-    calibrate(model, validation.a, validation.b, validation.union, validation.variant == REMESHED, bodies)
+    remeshed = validation.variant == REMESHED
+    calibrate(model, validation.a, validation.b, validation.union, remeshed, bodies, settings.sigma_floors)
     model.cpu().eval()
     return model

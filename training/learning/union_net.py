@@ -231,7 +231,7 @@ class UnionOperator(nn.Module):
             self.log_gate_width = nn.Parameter(torch.tensor(math.log(GATE_WIDTH)))
         # Interval calibration weights, fitted on validation data after training.
         self.register_buffer("sigma_scale", torch.ones(()))
-        self.register_buffer("sigma_floor", torch.full((), SIGMA_FLOOR))
+        self.register_buffer("sigma_floor", torch.full((), SIGMA_FLOOR), persistent=False)  # set by calibration
         self.register_buffer("sigma_decrease", torch.zeros(()))
         self.register_buffer("sigma_disagreement", torch.zeros(()))
 

@@ -185,6 +185,7 @@ def test_calibration_covers_ninety_percent_and_bins_pairs_by_what_makes_them_unc
     meshing), re-meshed pairs have their own bin, a re-scan 1 % apart is in the one-region bin,
     different parts in the others."""
     from training.learning.train_union import (
+        FLOOR_GRID,
         IDENTICAL_BIN,
         REMESHED_BIN,
         TWICE_BIN,
@@ -202,7 +203,7 @@ def test_calibration_covers_ninety_percent_and_bins_pairs_by_what_makes_them_unc
     remeshed = np.zeros(300, bool)
     remeshed[::10] = True  # ten of the identical pairs, ten re-scans, ten different pairs
     bodies = (np.arange(50) + 1000, np.arange(300))  # no memory row is a calibration pair's body
-    weights = calibrate(model, a.numpy(), b.numpy(), truth, remeshed, bodies)
+    weights = calibrate(model, a.numpy(), b.numpy(), truth, remeshed, bodies, FLOOR_GRID)
     assert len(weights) == 4 and all(w >= 0 for w in weights) and weights[0] > 0 and weights[1] > 0
     with torch.no_grad():
         mean, sigma = model(a, b)
