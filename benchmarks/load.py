@@ -9,8 +9,11 @@ async httpx client at a fixed concurrency for a fixed time, in two scenarios:
 - ``spectra``: the same two parts sent as the spectra the first scenario returned, so only
   validation and the operator run.
 
-It prints p50/p95/p99 latency, throughput and error counts per scenario, then an in-process
-single-request breakdown (parse and checks, Laplacian assembly, eigen-solve, inference;
+Then, one client at a time (``--latency-seconds`` each), the latency of ``/v1/spectrum`` of each
+part alone and of ``/v1/union`` of the two uploads: the union's p50 over the sum of the two
+spectra's p50 says whether a request's uploads are solved side by side (0.5 on two free cores)
+or one after the other (1.0). It prints p50/p95/p99 latency, throughput and error counts per
+scenario, then an in-process single-request breakdown (parse and checks, Laplacian assembly, eigen-solve, inference;
 median of repeats). Figures go in the README's performance section.
 """
 
@@ -57,8 +60,8 @@ class Tally:
         }
 
 
-async def drive(url: str, request: dict, concurrency: int, seconds: float) -> Tally:
-    """``concurrency`` clients posting ``request`` back to back for ``seconds``."""
+async def drive(url: str, request: dict, concurrency: int, seconds: float, endpoint: str = "/v1/union") -> Tally:
+    """``concurrency`` clients posting ``request`` to ``endpoint`` back to back for ``seconds``."""
     tally = Tally([], {}, seconds)
     deadline = time.perf_counter() + seconds
 
@@ -66,7 +69,7 @@ async def drive(url: str, request: dict, concurrency: int, seconds: float) -> Ta
         while time.perf_counter() < deadline:
             started = time.perf_counter()
             try:
-                response = await http.post(f"{url}/v1/union", **request)
+                response = await http.post(f"{url}{endpoint}", **request)
                 if response.status_code == 200:
                     tally.latencies.append(time.perf_counter() - started)
                     continue
@@ -124,6 +127,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=30.0, help="per scenario")
     parser.add_argument("--concurrency", type=int, default=8)
     parser.add_argument("--repeats", type=int, default=7, help="for the single-request breakdown")
+    parser.add_argument("--latency-seconds", type=float, default=15.0, help="per one-client latency scenario")
     args = parser.parse_args()
 
     settings = Settings()
@@ -140,6 +144,13 @@ def main() -> None:
             asyncio.run(drive(url, {"files": files}, args.concurrency, args.seconds)).summary("files"),
             asyncio.run(drive(url, {"data": {"spectra": spectra}}, args.concurrency, args.seconds)).summary("spectra"),
         ]
+        alone = [
+            asyncio.run(drive(url, {"files": {"file": file[1]}}, 1, args.latency_seconds, "/v1/spectrum"))
+            for file in files
+        ]
+        together = asyncio.run(drive(url, {"files": files}, 1, args.latency_seconds))
+        latency = [tally.summary(f"/v1/spectrum, part {i} alone") for i, tally in enumerate(alone)]
+        latency.append(together.summary("/v1/union, both uploaded"))
     finally:
         if server:
             server.terminate()
@@ -155,6 +166,13 @@ def main() -> None:
             f"| {r['scenario']} | {r['requests']} | {r['ok']} | {r['errors'] or 0} | {r['throughput_rps']} | "
             f"{r['p50_ms']} | {r['p95_ms']} | {r['p99_ms']} |"
         )
+    print("\none client at a time:")
+    print("| request | requests | p50 ms | p95 ms |")
+    print("|---|---|---|---|")
+    for r in latency:
+        print(f"| {r['scenario']} | {r['ok']} | {r['p50_ms']} | {r['p95_ms']} |")
+    ratio = latency[-1]["p50_ms"] / (latency[0]["p50_ms"] + latency[1]["p50_ms"])
+    print(f"union p50 / sum of the two spectrum p50s: {ratio:.2f}")
     print("\nsingle two-part union, in process (median ms per request):")
     print(json.dumps(breakdown(parts, models, args.repeats), indent=1))
 
