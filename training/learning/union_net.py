@@ -218,6 +218,14 @@ def _encoder(width: int, heads: int, layers: int, feed_forward: int, dropout: fl
 CORRECTIONS = {"deepsets": DeepSetsCorrection, "transformer": TransformerCorrection}
 
 
+def _fixed_floor_of_older_states(module: nn.Module, state: dict, prefix: str, *_: object) -> None:
+    """States saved before σ's floor was a weight of its own carry none: theirs was the fixed
+    SIGMA_FLOOR, scaled with the spread (σ = (spread + SIGMA_FLOOR)·sigma_scale + …)."""
+    key = prefix + "sigma_floor"
+    if key not in state and prefix + "sigma_scale" in state:
+        state[key] = SIGMA_FLOOR * state[prefix + "sigma_scale"]
+
+
 class UnionOperator(nn.Module):
     """(λ(A), λ(B)) → (λ(A ∪ B), σ), both (B, k) in 1/m²."""
 
@@ -231,9 +239,10 @@ class UnionOperator(nn.Module):
             self.log_gate_width = nn.Parameter(torch.tensor(math.log(GATE_WIDTH)))
         # Interval calibration weights, fitted on validation data after training.
         self.register_buffer("sigma_scale", torch.ones(()))
-        self.register_buffer("sigma_floor", torch.full((), SIGMA_FLOOR), persistent=False)  # set by calibration
+        self.register_buffer("sigma_floor", torch.full((), SIGMA_FLOOR))
         self.register_buffer("sigma_decrease", torch.zeros(()))
         self.register_buffer("sigma_disagreement", torch.zeros(()))
+        self.register_load_state_dict_pre_hook(_fixed_floor_of_older_states)
 
     def forward(
         self, a: torch.Tensor, b: torch.Tensor, exclude: torch.Tensor | None = None

@@ -216,3 +216,15 @@ def test_calibration_covers_ninety_percent_and_bins_pairs_by_what_makes_them_unc
     assert (bins[200:][~remeshed[200:]] > TWICE_BIN).all()
     too_few = calibration_bins(model, a.numpy(), b.numpy(), np.linspace(0, 1, 300), remeshed & (np.arange(300) < 30))
     assert not (too_few == REMESHED_BIN).any()
+
+
+def test_a_state_saved_before_the_floor_was_a_weight_loads_with_the_fixed_floor_it_had():
+    """Older checkpoints have no ``sigma_floor``: theirs was SIGMA_FLOOR scaled with the spread."""
+    from training.learning.union_net import SIGMA_FLOOR
+
+    saved = operator("deepsets").state_dict()
+    saved["sigma_scale"] = torch.tensor(0.9)
+    del saved["sigma_floor"]
+    model = operator("deepsets")
+    model.load_state_dict(saved)  # strict: nothing missing
+    assert float(model.sigma_floor) == pytest.approx(0.9 * SIGMA_FLOOR)
