@@ -37,7 +37,7 @@ def build_dataset_command(
 DataOption = Annotated[Path, typer.Option(help="A built data set directory.")]
 ModelsOption = Annotated[Path, typer.Option(help="Where the ONNX models, metrics and card go.")]
 PresetOption = Annotated[
-    str, typer.Option(help="Training preset: tiny, standard, standard-squared, standard-prior, standard-deepsets.")
+    str, typer.Option(help="Training preset: tiny, standard, or a comparison standard-* (training.learning.pipeline).")
 ]
 
 

@@ -219,6 +219,7 @@ def retrieval_table(metrics: dict) -> list[str]:
 
 
 def render(metrics: dict, command: str) -> str:
+    validation = metrics["union_validation"]
     lines = [
         BEGIN,
         f"Produced by `{command}`.",
@@ -255,8 +256,8 @@ def render(metrics: dict, command: str) -> str:
         "",
         *extra_table(metrics),
         "",
-        "Union operator, validation mae per epoch: "
-        + ", ".join(f"{m:.2f}" for m in metrics.get("union_validation_mae", [])),
+        f"Union operator, validation {validation['metric']} per epoch (the lowest is kept): "
+        + ", ".join(f"{m:.4g}" for m in validation["per_epoch"]),
         "",
         "### Identity retrieval (Table 4)",
         "Queries: the full-coverage test pairs (every group and variant); database: every complete posed body",

@@ -21,6 +21,7 @@ from training.learning.baselines import UnionLookup, elementwise_min, larger_par
 from training.learning.data import PairTable, SpectralData
 from training.learning.localizer_net import Localizer
 from training.learning.masks import symmetric_scores
+from training.learning.spectral_errors import spectral_errors
 from training.learning.train_localizer import localize
 from training.learning.train_union import predict
 from training.learning.union_net import UnionOperator
@@ -79,23 +80,6 @@ PAPER_IOU = {
         "test_b/unknown_woman/remeshed": (96.81, 98.98),
     },
 }
-
-
-def spectral_errors(predicted: np.ndarray, truth: np.ndarray) -> dict:
-    """mse and mae over all eigenvalues (1/m²), and mean relative error, overall and per index.
-
-    A closed union has λ₁ = 0, where a relative error means nothing: such entries are left out.
-    """
-    difference = predicted - truth
-    meaningful = truth > 1e-6
-    relative = np.where(meaningful, np.abs(difference) / np.where(meaningful, truth, 1), 0.0)
-    per_index = relative.sum(0) / np.maximum(meaningful.sum(0), 1)
-    return {
-        "mse": float(np.mean(difference**2)),
-        "mae": float(np.mean(np.abs(difference))),
-        "mre": float(relative.sum() / max(meaningful.sum(), 1)),
-        "mre_per_eigenvalue": [round(float(x), 5) for x in per_index],
-    }
 
 
 UnionPredictor = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # (a, b) → (union, σ)

@@ -53,6 +53,20 @@ TRAINING_PRESETS = {
         UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0, sigma_floors=FLOOR_GRID),
         LocalizerTraining(epochs=8, batch=128, first_restart=8),
     ),
+    # The same data, the epoch kept chosen by validation mean relative error (the figure the tables
+    # report and the loss follows) rather than by mae in 1/m², which the top eigenvalues rule.
+    "standard-remeshed-mre": TrainingPreset(
+        UnionTraining(
+            epochs=12,
+            batch=64,
+            learning_rate=1e-3,
+            first_restart=12,
+            dropout=0.0,
+            sigma_floors=FLOOR_GRID,
+            selection="mre",
+        ),
+        LocalizerTraining(epochs=8, batch=128, first_restart=8),
+    ),
     # The comparison of losses: the squared error of z (the mean of the plausible unions) as before.
     "standard-squared": TrainingPreset(
         UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0, loss="squared"),
@@ -143,7 +157,8 @@ def run_pipeline(
     save_seed(models / SEED_FILE, labels, complete)
     metrics["retrieval"] = retrieval_table(data, retrieval_queries(data, union), complete, identity)
     metrics["parity_max_relative"] = parity
-    metrics["union_validation_mae"] = [round(m, 3) for m in validation_history(runs / "union.pt")]
+    history = [round(m, 4) for m in validation_history(runs / "union.pt")]
+    metrics["union_validation"] = {"metric": preset.union.selection, "per_epoch": history}
     total = round(time.perf_counter() - started, 1)
     # An evaluation of finished runs says how long it took, never that training took that long.
     metrics["seconds"] = {"training": round(trained - started, 1), "total": total} if train else {"evaluation": total}

@@ -8,8 +8,8 @@ the other views of its scanning session are all cut from its body, and their uni
 union or nearly, which no pair of a new body has in the memory. Every step also sees a smaller
 batch of chains whose inner union is the operator's *own prediction*, so errors are trained not
 to grow along a chain. Inputs get a small multiplicative jitter (the spectrum of a fixed region
-moves ~1 % across poses). The best epoch by validation mae is kept; σ is calibrated on the
-validation rows at the end.
+moves ~1 % across poses). The best epoch by a validation metric (``selection``) is kept; σ is
+calibrated on the validation rows at the end.
 """
 
 from dataclasses import asdict, dataclass, replace
@@ -22,6 +22,7 @@ from app.contract import INTERVAL_Z
 from training.data.spectra import REMESHED
 from training.learning.data import PairTable, SpectralData
 from training.learning.fit import LoopSettings, Objective, fit, pick_device, seed_everything
+from training.learning.spectral_errors import spectral_errors
 from training.learning.union_net import (
     MONOTONE,
     SIGMA_FLOOR,
@@ -43,6 +44,7 @@ class UnionTraining(LoopSettings):
     # σ's floor, relative to the spread's weight, as the calibration may choose it: the served
     # models keep the fixed 0.01; a grid lets validation re-meshed rows (if any) set it.
     sigma_floors: tuple[float, ...] = (SIGMA_FLOOR,)
+    selection: str = "mae"  # the validation metric that picks the epoch kept: a key of spectral_errors
 
 
 def _tensor(array: np.ndarray, device: torch.device) -> torch.Tensor:
@@ -242,10 +244,11 @@ def train_union(
             chains = tuple(t[pick] for t in chain_tensors)
         return _losses(model, batch, same_body(memory_bodies, memory_bodies[rows]), chains, settings.loss)
 
-    def validation_mae() -> float:
-        return float(np.abs(predict(model, validation.a, validation.b, bodies)[0] - validation.union).mean())
+    def validation_metric() -> float:
+        predicted = predict(model, validation.a, validation.b, bodies)[0]
+        return spectral_errors(predicted, validation.union)[settings.selection]
 
-    objective = Objective("union", len(train), batch_loss, validation_mae, lambda mae: f"{mae:.3f}")
+    objective = Objective("union", len(train), batch_loss, validation_metric, lambda metric: f"{metric:.4g}")
     fit(model, objective, settings, checkpoint, run_config, generator)
     remeshed = validation.variant == REMESHED
     calibrate(model, validation.a, validation.b, validation.union, remeshed, bodies, settings.sigma_floors)
