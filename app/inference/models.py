@@ -17,7 +17,7 @@ from app.contract import INTERVAL_Z, LOCALIZER_FILE, LOCALIZER_INPUTS, MASK_THRE
 from app.geometry.laplacian import mesh_operators
 from app.inference.manifest import verify_manifest
 from app.inference.spectra import InvalidSpectrum
-from app.inference.template import PART_NAMES, Template
+from app.inference.template import PART_NAMES, Template, part_coverage
 
 
 @dataclass(frozen=True)
@@ -107,10 +107,7 @@ class SpectralModels:
         (probability,) = self.localizer_session.run(None, {LOCALIZER_INPUTS[0]: spectrum[None].astype(np.float32)})
         _require_finite(probability)
         inside = probability[0] >= MASK_THRESHOLD
+        shares = part_coverage(inside, self.vertex_area, self.template.labels)
+        coverage = {name: float(share) for name, share in zip(PART_NAMES, shares, strict=True)}
         area = self.vertex_area
-        labels = self.template.labels
-        coverage = {
-            name: float(area[inside & (labels == index)].sum() / area[labels == index].sum())
-            for index, name in enumerate(PART_NAMES)
-        }
         return Region(np.flatnonzero(inside), float(area[inside].sum() / area.sum()), coverage)

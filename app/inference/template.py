@@ -56,6 +56,17 @@ class Template:
         )
 
 
+def part_coverage(masks: np.ndarray, vertex_area: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """(..., parts) the covered share of each body part's area (in :data:`PART_NAMES` order) for
+    boolean template masks (..., n): what a front-end shows as "still missing". Areas, not vertex
+    counts, since the template's triangles are far from uniform (a hand has five times a
+    thigh's vertices)."""
+    share = np.zeros((len(labels), len(PART_NAMES)))
+    share[np.arange(len(labels)), labels] = vertex_area
+    covered = masks @ (share / np.maximum(share.sum(0), np.finfo(float).tiny))  # a part with no area: 0
+    return np.clip(covered, 0.0, 1.0)  # a whole part sums its shares to 1 give or take rounding
+
+
 REGION_COLOUR = (214, 64, 44, 255)
 REST_COLOUR = (200, 200, 200, 255)
 

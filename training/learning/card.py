@@ -68,18 +68,23 @@ def per_eigenvalue_table(metrics: dict, methods: tuple[str, ...] = ("operator", 
 def localization_table(metrics: dict) -> list[str]:
     names = sorted({name for row in metrics["rows"].values() for name in row["localization"]})
     paper = metrics["paper"]["localization"]
-    header = "| row | " + " | ".join(f"{n}: IoU / acc." for n in names) + " | paper one / six: IoU |"
+    header = "| row | " + " | ".join(f"{n}: IoU / acc. / part cov. err." for n in names) + " | paper one / six: IoU |"
     lines = [header, "|---" * (len(names) + 2) + "|"]
     for key in PAPER_ROWS:
         row = metrics["rows"].get(key)
         if row is None:
             continue
-        cells = " | ".join(
-            f"{percent(row['localization'][n]['iou'])} / {percent(row['localization'][n]['accuracy'])}" for n in names
-        )
+        cells = " | ".join(_localization_cell(row["localization"][n], ("iou", "accuracy")) for n in names)
         reference = f"{paper['one'][key][0]:.2f} % / {paper['six'][key][0]:.2f} %"
         lines.append(f"| {key} | {cells} | {reference} |")
     return lines
+
+
+def _localization_cell(scores: dict, names: tuple[str, ...]) -> str:
+    """The named scores in percent, then the part-coverage error in points (absent from older metrics)."""
+    cells = [percent(scores[name]) for name in names]
+    error = scores.get("coverage_error")
+    return " / ".join([*cells, "—" if error is None else f"{100 * error:.1f} pt"])
 
 
 def extra_table(metrics: dict) -> list[str]:
@@ -103,8 +108,8 @@ def strata_table(metrics: dict) -> list[str]:
     lines = [
         "| split / stratum / variant | n | operator mae / mre | 90 % coverage | above min | "
         + " | ".join(f"{b} mre" for b in BASELINES)
-        + " | best baseline ÷ operator |",
-        "|---" * (6 + len(BASELINES)) + "|",
+        + " | best baseline ÷ operator | localized union: IoU / part cov. err. |",
+        "|---" * (7 + len(BASELINES)) + "|",
     ]
     for key, row in metrics.get("strata", {}).items():
         union = row["union"]
@@ -115,7 +120,7 @@ def strata_table(metrics: dict) -> list[str]:
             f"| {key} | {row['rows']} | {ours['mae']:.2f} / {percent(ours['mre'])} | "
             f"{percent(row['interval_coverage'])} | {percent(row['above_minimum'])} | "
             + " | ".join(percent(union[b]["mre"]) for b in BASELINES)
-            + f" | {ratio} |"
+            + f" | {ratio} | {_localization_cell(row['localization']['all'], ('iou',))} |"
         )
     return lines
 

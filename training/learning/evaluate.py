@@ -145,9 +145,10 @@ class Evaluator:
             return out
         truth = self.data.masks(rows.mask_union)
         out["localization"] = {}
+        template = self.data.template
         for name, region in self.localizers.items():
-            iou, accuracy = symmetric_scores(region(mean), truth, self.areas, self.data.template.mirror)
-            out["localization"][name] = {"iou": float(iou.mean()), "accuracy": float(accuracy.mean())}
+            scores = symmetric_scores(region(mean), truth, self.areas, template.mirror, template.labels)
+            out["localization"][name] = {score: float(values.mean()) for score, values in vars(scores).items()}
         return out
 
     def strata(self, rows: PairTable) -> np.ndarray:

@@ -1,26 +1,48 @@
-"""Symmetry-aware overlap of predicted and true template masks, weighted by vertex area.
+"""Symmetry-aware scores of predicted template masks against the true ones, weighted by vertex area.
 
 Spectra cannot tell a region from its mirror image, so every score takes the better of the
-true mask and its mirror (the paper's rule); areas, not vertex counts, measure size because
-the template's triangles are far from uniform (a hand has five times a thigh's vertices).
+true mask and its mirror (the paper's rule: the orientation with the higher IoU, the same one
+for every score of a row); areas, not vertex counts, measure size because the template's
+triangles are far from uniform (a hand has five times a thigh's vertices).
 """
+
+from dataclasses import dataclass, fields
 
 import numpy as np
 
+from app.inference.template import PART_NAMES, part_coverage
+
+
+@dataclass(frozen=True)
+class MaskScores:
+    """Per row: symmetric IoU, area accuracy, and the mean absolute error of the covered share of
+    each body part (what a front-end's "still missing" list reads), all as fractions."""
+
+    iou: np.ndarray
+    accuracy: np.ndarray
+    coverage_error: np.ndarray
+
 
 def symmetric_scores(
-    predicted: np.ndarray, truth: np.ndarray, weights: np.ndarray, mirror: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """(IoU, accuracy) per row of (m, n) boolean masks, each against the better orientation."""
+    predicted: np.ndarray, truth: np.ndarray, weights: np.ndarray, mirror: np.ndarray, labels: np.ndarray
+) -> MaskScores:
+    """Scores of (m, n) boolean masks, each row against the better orientation of its truth;
+    ``labels`` are the template's part labels."""
     w = weights / weights.sum()
-    best_iou = np.full(len(predicted), -1.0)
-    best_accuracy = np.zeros(len(predicted))
+    present = np.bincount(labels, minlength=len(PART_NAMES)) > 0  # parts a (test) template may lack
+    predicted_coverage = part_coverage(predicted, weights, labels)[:, present]
+    orientations = []
     for target in (truth, truth[:, mirror]):
         intersection = (predicted & target) @ w
         union = (predicted | target) @ w
-        iou = np.where(union > 0, intersection / np.maximum(union, 1e-12), 1.0)
-        accuracy = (predicted == target) @ w
-        better = iou > best_iou
-        best_iou = np.where(better, iou, best_iou)
-        best_accuracy = np.where(better, accuracy, best_accuracy)
-    return best_iou, best_accuracy
+        orientations.append(
+            MaskScores(
+                iou=np.where(union > 0, intersection / np.maximum(union, 1e-12), 1.0),
+                accuracy=(predicted == target) @ w,
+                coverage_error=np.abs(predicted_coverage - part_coverage(target, weights, labels)[:, present]).mean(1),
+            )
+        )
+    direct, mirrored = orientations
+    better = mirrored.iou > direct.iou
+    chosen = (np.where(better, getattr(mirrored, f.name), getattr(direct, f.name)) for f in fields(MaskScores))
+    return MaskScores(*chosen)

@@ -116,8 +116,9 @@ def train_localizer(
         return symmetric_loss(model.logits(x), truth, weights, mirror)
 
     def validation_loss() -> float:
-        iou, _ = symmetric_scores(localize(model, validation_spectra), validation_masks, areas, data.template.mirror)
-        return -float(iou.mean())  # lower is better
+        predicted = localize(model, validation_spectra)
+        scores = symmetric_scores(predicted, validation_masks, areas, data.template.mirror, data.template.labels)
+        return -float(scores.iou.mean())  # lower is better
 
     objective = Objective("localizer", len(spectra), batch_loss, validation_loss, lambda loss: f"{-loss:.4f}")
     fit(model, objective, settings, checkpoint, run_config, generator)

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from app.inference.template import PART_NAMES
 from training.learning.baselines import UnionLookup, elementwise_min, larger_part
 from training.learning.card import per_eigenvalue_table
 from training.learning.masks import symmetric_scores
@@ -40,17 +41,21 @@ def test_min_and_larger_part():
 def test_symmetric_scores_hand_checked():
     weights = np.array([1.0, 1.0, 2.0, 4.0])
     mirror = np.array([1, 0, 2, 3])  # vertices 0 and 1 swap sides
-    truth = np.array([[True, False, True, False]] * 3)
+    labels = np.array([PART_NAMES.index(p) for p in ("left_hand", "right_hand", "torso", "torso")])
+    truth = np.array([[True, False, True, False]] * 3)  # covers: left hand 1, right hand 0, torso 2/6
     predicted = np.array(
         [
             [False, True, True, False],  # the mirror image: perfect
             [True, False, False, False],  # 1 of 3 area units, everything else right but vertex 2
-            [False, False, False, True],  # disjoint
+            [False, False, False, True],  # disjoint: the orientation as given is kept
         ]
     )
-    iou, accuracy = symmetric_scores(predicted, truth, weights, mirror)
-    np.testing.assert_allclose(iou, [1.0, 1 / 3, 0.0])
-    np.testing.assert_allclose(accuracy, [1.0, 6 / 8, 1 / 8])
+    scores = symmetric_scores(predicted, truth, weights, mirror, labels)
+    np.testing.assert_allclose(scores.iou, [1.0, 1 / 3, 0.0])
+    np.testing.assert_allclose(scores.accuracy, [1.0, 6 / 8, 1 / 8])
+    # Covered shares (left hand, right hand, torso): predicted (0, 1, 1/3), (1, 0, 0), (0, 0, 4/6);
+    # against the mirror (0, 1, 1/3), the truth (1, 0, 1/3), the truth; parts the template lacks don't count.
+    np.testing.assert_allclose(scores.coverage_error, [0.0, (1 / 3) / 3, (1 + 1 / 3) / 3])
 
 
 def test_retrieval_hit_rates_hand_checked():
