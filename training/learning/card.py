@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from training.learning.masks import SERVED_LOCALIZER
+
 BEGIN, END = "<!-- metrics:begin -->", "<!-- metrics:end -->"
 PAPER_ROWS = [
     f"{split}/{group}/{variant}"
@@ -120,7 +122,7 @@ def strata_table(metrics: dict) -> list[str]:
             f"| {key} | {row['rows']} | {ours['mae']:.2f} / {percent(ours['mre'])} | "
             f"{percent(row['interval_coverage'])} | {percent(row['above_minimum'])} | "
             + " | ".join(percent(union[b]["mre"]) for b in BASELINES)
-            + f" | {ratio} | {_localization_cell(row['localization']['all'], ('iou',))} |"
+            + f" | {ratio} | {_localization_cell(row['localization'][SERVED_LOCALIZER], ('iou',))} |"
         )
     return lines
 

@@ -6,6 +6,7 @@ two files instead of by hand, so that no cell is copied wrong and no row is left
 """
 
 from training.learning.card import BASELINES, percent
+from training.learning.masks import SERVED_LOCALIZER
 
 
 def _mre(row: dict, method: str = "operator") -> float:
@@ -88,7 +89,7 @@ def sessions_table(before: dict, after: dict) -> list[str]:
     return lines
 
 
-def localization_table(before: dict, after: dict, localizer: str = "all") -> list[str]:
+def localization_table(before: dict, after: dict, localizer: str = SERVED_LOCALIZER) -> list[str]:
     """The service localizer's symmetric IoU on every row that has it."""
     lines = ["| localization IoU (service localizer) | before | after |", "|---|---|---|"]
     for key, new in after["rows"].items():

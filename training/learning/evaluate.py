@@ -20,7 +20,7 @@ from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
 from training.learning.baselines import UnionLookup, elementwise_min, larger_part
 from training.learning.data import PairTable, SpectralData
 from training.learning.localizer_net import Localizer
-from training.learning.masks import symmetric_scores
+from training.learning.masks import PARTS_UNITED, SERVED_LOCALIZER, symmetric_scores, united_by_mirror_rule
 from training.learning.spectral_errors import spectral_errors
 from training.learning.train_localizer import localize
 from training.learning.train_union import predict
@@ -111,7 +111,7 @@ def served_predictors(models: Path, batch: int = 1024) -> tuple[UnionPredictor, 
         (probability,) = localizer_graph.run(None, {LOCALIZER_INPUTS[0]: spectra.astype(np.float32)})
         return probability >= MASK_THRESHOLD
 
-    return union, {"all": region}
+    return union, {SERVED_LOCALIZER: region}
 
 
 @dataclass
@@ -146,8 +146,12 @@ class Evaluator:
         truth = self.data.masks(rows.mask_union)
         out["localization"] = {}
         template = self.data.template
-        for name, region in self.localizers.items():
-            scores = symmetric_scores(region(mean), truth, self.areas, template.mirror, template.labels)
+        predicted = {name: region(mean) for name, region in self.localizers.items()}
+        if SERVED_LOCALIZER in self.localizers:  # the second opinion: each part localized, then united
+            part_masks = (self.localizers[SERVED_LOCALIZER](part) for part in (rows.a, rows.b))
+            predicted[PARTS_UNITED] = united_by_mirror_rule(*part_masks, self.areas, template.mirror)
+        for name, masks in predicted.items():
+            scores = symmetric_scores(masks, truth, self.areas, template.mirror, template.labels)
             out["localization"][name] = {score: float(values.mean()) for score, values in vars(scores).items()}
         return out
 

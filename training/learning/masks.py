@@ -12,6 +12,9 @@ import numpy as np
 
 from app.inference.template import PART_NAMES, part_coverage
 
+SERVED_LOCALIZER = "all"  # the localizer trained on every training identity, the one the service loads
+PARTS_UNITED = "parts_united"  # the served localizer on each part, the two regions united
+
 
 @dataclass(frozen=True)
 class MaskScores:
@@ -46,3 +49,11 @@ def symmetric_scores(
     better = mirrored.iou > direct.iou
     chosen = (np.where(better, getattr(mirrored, f.name), getattr(direct, f.name)) for f in fields(MaskScores))
     return MaskScores(*chosen)
+
+
+def united_by_mirror_rule(first: np.ndarray, second: np.ndarray, weights: np.ndarray, mirror: np.ndarray) -> np.ndarray:
+    """(m, n) union of two parts' localized masks, the second in the orientation that overlaps the
+    first more: each is right only up to left/right, and parts of one scan overlap or touch."""
+    flipped = second[:, mirror]
+    keep = ((first & second) @ weights >= (first & flipped) @ weights)[:, None]
+    return first | np.where(keep, second, flipped)

@@ -24,6 +24,7 @@ from training.learning.evaluate import evaluate, trained_predictors
 from training.learning.export import export_localizer, export_union, localizer_parity, union_parity
 from training.learning.fit import is_finished, validation_history
 from training.learning.localizer_net import Localizer, LocalizerConfig
+from training.learning.masks import SERVED_LOCALIZER
 from training.learning.shapedna import complete_shapes, retrieval_table, save_seed
 from training.learning.train_localizer import LocalizerTraining, train_localizer
 from training.learning.train_union import FLOOR_GRID, UnionTraining, predict, train_union
@@ -94,10 +95,10 @@ def localizer_identities(data: SpectralData) -> dict[str, np.ndarray | None]:
     known_men = np.unique(data.identity_of(pairs.shape_a[train & (pairs.group == "known_man")]))
     known = np.unique(data.identity_of(pairs.shape_a[train]))
     six = np.concatenate([known_men[:3], np.setdiff1d(known, known_men)[:3]])
-    return {"one": known_men[:1], "six": six, "all": None}
+    return {"one": known_men[:1], "six": six, SERVED_LOCALIZER: None}
 
 
-LOCALIZER_RUNS = ("one", "six", "all", "per_vertex")
+LOCALIZER_RUNS = ("one", "six", SERVED_LOCALIZER, "per_vertex")
 
 
 def localizer_checkpoint(runs: Path, name: str) -> Path:
@@ -143,14 +144,14 @@ def run_pipeline(
     trained = time.perf_counter()
     models.mkdir(parents=True, exist_ok=True)
     export_union(union, models / UNION_FILE)
-    export_localizer(localizers["all"], models / LOCALIZER_FILE)
+    export_localizer(localizers[SERVED_LOCALIZER], models / LOCALIZER_FILE)
     for name in ("template.npz", "template.json"):  # the template the localizer was trained on
         shutil.copyfile(data_dir / "template" / name, models / name)
     write_manifest(models)
     real = data.pairs.rows(np.flatnonzero(data.pairs.split != "train"))
     parity = {
         "union": union_parity(union, models / UNION_FILE, real.a, real.b),
-        "localizer": localizer_parity(localizers["all"], models / LOCALIZER_FILE, real.union),
+        "localizer": localizer_parity(localizers[SERVED_LOCALIZER], models / LOCALIZER_FILE, real.union),
     }
     metrics = evaluate(data, *trained_predictors(union, localizers))
     labels, complete, identity = complete_shapes(data)

@@ -6,7 +6,7 @@ import pytest
 from app.inference.template import PART_NAMES
 from training.learning.baselines import UnionLookup, elementwise_min, larger_part
 from training.learning.card import per_eigenvalue_table
-from training.learning.masks import symmetric_scores
+from training.learning.masks import symmetric_scores, united_by_mirror_rule
 
 
 @pytest.fixture
@@ -56,6 +56,17 @@ def test_symmetric_scores_hand_checked():
     # Covered shares (left hand, right hand, torso): predicted (0, 1, 1/3), (1, 0, 0), (0, 0, 4/6);
     # against the mirror (0, 1, 1/3), the truth (1, 0, 1/3), the truth; parts the template lacks don't count.
     np.testing.assert_allclose(scores.coverage_error, [0.0, (1 / 3) / 3, (1 + 1 / 3) / 3])
+
+
+def test_parts_united_in_the_orientation_that_overlaps():
+    weights = np.array([1.0, 1.0, 1.0, 1.0])
+    mirror = np.array([1, 0, 3, 2])  # 0 ↔ 1 and 2 ↔ 3 swap sides
+    first = np.array([[True, False, True, False], [True, False, False, False]])
+    second = np.array([[False, True, False, True], [True, False, False, True]])
+    # Row 0: the second part as given misses the first, mirrored it lies on it (0 and 2).
+    # Row 1: as given it overlaps at vertex 0, mirrored ({1, 2}) not at all: kept as given.
+    united = united_by_mirror_rule(first, second, weights, mirror)
+    np.testing.assert_array_equal(united, [[True, False, True, False], [True, False, False, True]])
 
 
 def test_retrieval_hit_rates_hand_checked():
