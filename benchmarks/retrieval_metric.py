@@ -31,7 +31,7 @@ from app.retrieval.distance import features
 from training.data.pairs import FULL_COVERAGE
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
-from training.learning.shapedna import TOP
+from training.learning.shapedna import TOP, identity_hits
 from training.learning.train_union import build_operator, memory_rows, predict
 from training.learning.union_net import UnionConfig
 
@@ -71,13 +71,11 @@ def hits(query_features: np.ndarray, query_shapes: np.ndarray, stored_features: 
     own shape excluded), by Euclidean distance of (already transformed) features, each difference
     times the query's ``weights`` row when given."""
     weights = np.ones_like(query_features) if weights is None else weights
-    out = np.zeros((len(query_features), len(TOP)), dtype=bool)
-    for row, (query, weight, shape) in enumerate(zip(query_features, weights, query_shapes, strict=True)):
+    out = []
+    for query, weight, shape in zip(query_features, weights, query_shapes, strict=True):
         distance = np.sqrt((((stored_features - query) * weight) ** 2).sum(-1))
-        distance[shape] = np.inf
-        ranked = identity[np.argsort(distance, kind="stable")[: max(TOP)]]
-        out[row] = [np.any(ranked[:t] == identity[shape]) for t in TOP]
-    return out
+        out.append(identity_hits(distance, identity[shape], shape, identity))
+    return np.array(out, dtype=bool).reshape(-1, len(TOP))
 
 
 def main() -> None:

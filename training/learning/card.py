@@ -83,10 +83,8 @@ def localization_table(metrics: dict) -> list[str]:
 
 
 def _localization_cell(scores: dict, names: tuple[str, ...]) -> str:
-    """The named scores in percent, then the part-coverage error in points (absent from older metrics)."""
-    cells = [percent(scores[name]) for name in names]
-    error = scores.get("coverage_error")
-    return " / ".join([*cells, "—" if error is None else f"{100 * error:.1f} pt"])
+    """The named scores in percent, then the part-coverage error in points."""
+    return " / ".join([*(percent(scores[name]) for name in names), f"{100 * scores['coverage_error']:.1f} pt"])
 
 
 def extra_table(metrics: dict) -> list[str]:

@@ -17,15 +17,15 @@ from app.inference.models import SpectralModels
 from training.data.camera import body_mesh, close_up_camera, orbit_camera, view_mask
 from training.data.regions import RegionSampler
 from training.data.spectra import region_mesh, remeshed
+from training.learning.spectral_errors import spectral_errors
 
 SEED = 20_261_201  # no data set build draws from this stream
 NESTED_SHARE = 0.98  # a close-up this much inside its far view counts as inside it
 
 
 def relative_error(predicted: np.ndarray, truth: np.ndarray) -> float:
-    """Mean relative error over the eigenvalues that are not a closed body's λ₁ = 0."""
-    meaningful = truth > 1e-6
-    return float(np.mean(np.abs(predicted - truth)[meaningful] / truth[meaningful]))
+    """Mean relative error of one spectrum over the eigenvalues that are not a closed body's λ₁ = 0."""
+    return spectral_errors(np.atleast_2d(predicted), np.atleast_2d(truth))["mre"]
 
 
 @dataclass(frozen=True)

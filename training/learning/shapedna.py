@@ -53,14 +53,23 @@ def hit_rates(
     queries: np.ndarray, query_identity: np.ndarray, excluded: np.ndarray, spectra: np.ndarray, identity: np.ndarray
 ) -> dict[str, float]:
     """Top-1/5/10 identity hit rates; ``excluded[i]`` is the stored shape query i may not match."""
-    hits = {t: 0 for t in TOP}
-    for query, person, skip in zip(queries, query_identity, excluded, strict=True):
-        distance = distances(query, spectra)
-        distance[skip] = np.inf
-        ranked = identity[np.argsort(distance, kind="stable")[: max(TOP)]]
-        for t in TOP:
-            hits[t] += bool(np.any(ranked[:t] == person))
-    return {f"top{t}": hits[t] / max(len(queries), 1) for t in TOP}
+    hits = np.array(
+        [
+            identity_hits(distances(query, spectra), person, skip, identity)
+            for query, person, skip in zip(queries, query_identity, excluded, strict=True)
+        ],
+        dtype=bool,
+    ).reshape(-1, len(TOP))
+    return {f"top{t}": float(hits[:, i].sum()) / max(len(queries), 1) for i, t in enumerate(TOP)}
+
+
+def identity_hits(distance: np.ndarray, person: int, excluded: int, identity: np.ndarray) -> list[bool]:
+    """For each t of TOP, whether ``person`` is among the t stored shapes nearest by ``distance``
+    (one query's distance to every stored shape), the stored shape ``excluded`` left out."""
+    distance = distance.copy()
+    distance[excluded] = np.inf
+    ranked = identity[np.argsort(distance, kind="stable")[: max(TOP)]]
+    return [bool(np.any(ranked[:t] == person)) for t in TOP]
 
 
 def retrieval_table(
