@@ -14,6 +14,9 @@ UNION_INPUTS = ("spectrum_a", "spectrum_b")  # float32 (batch, k), eigenvalues i
 UNION_OUTPUTS = ("union", "sigma")  # float32 (batch, k): the union's eigenvalues and their σ
 LOCALIZER_INPUTS = ("spectrum",)  # float32 (batch, k)
 LOCALIZER_OUTPUTS = ("probability",)  # float32 (batch, template vertices)
+RECONSTRUCTION_FILE = "reconstruction.onnx"  # optional: served when present (POST /v1/reconstruct)
+RECONSTRUCTION_INPUTS = ("spectrum",)  # float32 (batch, k): a complete body's spectrum, 1/m²
+RECONSTRUCTION_OUTPUTS = ("vertices",)  # float32 (batch, template vertices, 3): its rest-pose body, metres
 MASK_THRESHOLD = 0.5  # a template vertex is in the region when the localizer's probability reaches this
 INTERVAL_Z = 1.6449  # σ is calibrated so that union ± INTERVAL_Z·σ holds 90 % of held-out eigenvalues
 

@@ -102,6 +102,15 @@ def main() -> None:
         ply = client.post("/v1/localize", params={"format": "ply"}, files=files(folder)).content
         header = ply[: ply.index(b"end_header")].decode().strip()
         show_text(f"curl -s {both} '{url}/v1/localize?format=ply' -o covered.ply", header)
+        rebuilt = client.post("/v1/reconstruct", files=files(folder)).json()
+        recorded["reconstruct"] = rounded({**rebuilt, "vertices": rebuilt["vertices"][:3]})
+        body = {
+            k: rebuilt[k] for k in ("height_m", "area_m2", "body_eigenvalues", "spectrum_relative_error", "vertices")
+        }
+        show_text(f"curl -s {both} {url}/v1/reconstruct", "(the union's fields as above, then:)\n" + shown(body))
+        mesh = client.post("/v1/reconstruct", params={"format": "ply"}, files=files(folder)).content
+        header = mesh[: mesh.index(b"end_header")].decode().strip()
+        show_text(f"curl -s {both} '{url}/v1/reconstruct?format=ply' -o body.ply", header)
         show(
             f"curl -s {both} '{url}/v1/retrieve?top=3'",
             client.post("/v1/retrieve", params={"top": 3}, files=files(folder)),

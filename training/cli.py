@@ -34,6 +34,21 @@ def build_dataset_command(
     typer.echo(f"{manifest['rows']} rows in {manifest['build_seconds']} s")
 
 
+@cli.command("build-bodies")
+def build_bodies_command(
+    out: Annotated[Path, typer.Option(help="Bodies directory for the shape decoder.")] = Path("data/bodies"),
+    preset: Annotated[str, typer.Option(help="tiny or standard.")] = "standard",
+    seed: Annotated[int, typer.Option()] = 0,
+    workers: Annotated[int | None, typer.Option(help="Local processes (default: all cores).")] = None,
+) -> None:
+    """Sample anny bodies for the shape decoder: rest-pose vertices and posed complete spectra."""
+    from training.reconstruction.bodies import BODIES_PRESETS, build_bodies
+
+    if preset not in BODIES_PRESETS:
+        raise typer.BadParameter(f"unknown preset {preset!r}")
+    typer.echo(build_bodies(BODIES_PRESETS[preset], out, seed=seed, workers=workers))
+
+
 DataOption = Annotated[Path, typer.Option(help="A built data set directory.")]
 ModelsOption = Annotated[Path, typer.Option(help="Where the ONNX models, metrics and card go.")]
 PresetOption = Annotated[
@@ -95,6 +110,31 @@ def compare_command(
     from training.learning.compare import comparison
 
     typer.echo(comparison(json.loads(before.read_text()), json.loads(after.read_text())), nl=False)
+
+
+@cli.command("train-decoder")
+def train_decoder_command(
+    bodies: Annotated[Path, typer.Option(help="A `build-bodies` directory.")] = Path("data/bodies"),
+    data: DataOption = Path("data/standard"),
+    union_run: Annotated[Path, typer.Option(help="The union operator's finished checkpoint.")] = Path(
+        "runs/standard/union.pt"
+    ),
+    runs: Annotated[Path, typer.Option(help="Checkpoints (resumed if present).")] = Path("runs/standard"),
+    models: ModelsOption = Path("models"),
+    preset: Annotated[str, typer.Option(help="tiny or standard.")] = "standard",
+    seed: Annotated[int, typer.Option()] = 0,
+) -> None:
+    """Train the shape decoder (spectrum → body), export it, evaluate it on unknown identities."""
+    import json
+
+    from training.reconstruction.pipeline import DECODER_PRESETS, run_decoder_pipeline
+
+    if preset not in DECODER_PRESETS:
+        raise typer.BadParameter(f"unknown preset {preset!r}")
+    command = f"spectral-unions-train train-decoder --bodies {bodies} --data {data} --union-run {union_run}"
+    command += f" --runs {runs} --models {models} --preset {preset} --seed {seed}"
+    metrics = run_decoder_pipeline(bodies, data, union_run, runs, models, preset, seed, command)
+    typer.echo(json.dumps(metrics["sets"], indent=1))
 
 
 def _pipeline(verb: str, data: Path, runs: Path, models: Path, preset: str, seed: int) -> None:

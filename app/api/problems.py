@@ -91,6 +91,7 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
             "files[0] scan.ply: the solve needed more memory than a solver worker may use",
         ),
     ],
+    501: [("reconstruction-unavailable", "Reconstruction unavailable", "these models have no shape decoder")],
     503: [
         (
             "not-ready",

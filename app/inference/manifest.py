@@ -11,10 +11,12 @@ import hashlib
 import json
 from pathlib import Path
 
-from app.contract import spectrum_definition
+from app.contract import RECONSTRUCTION_FILE, spectrum_definition
 
 MANIFEST_FILE = "MANIFEST.json"
 ARTEFACTS = ("union.onnx", "localizer.onnx", "template.npz", "template.json")
+# Served when present; recorded and checked like the others when they are.
+OPTIONAL_ARTEFACTS = (RECONSTRUCTION_FILE,)
 
 
 class ModelsCorrupt(ValueError):
@@ -27,14 +29,17 @@ def digest(path: Path) -> str:
 
 def write_manifest(directory: Path) -> None:
     """Record the digests of the served artefacts (run after every export)."""
-    entries = {name: digest(directory / name) for name in ARTEFACTS}
+    present = [name for name in OPTIONAL_ARTEFACTS if (directory / name).exists()]
+    entries = {name: digest(directory / name) for name in (*ARTEFACTS, *present)}
     manifest = {"sha256": entries, "spectrum_definition": spectrum_definition()}
     (directory / MANIFEST_FILE).write_text(json.dumps(manifest, indent=1) + "\n")
 
 
-def verify_manifest(directory: Path) -> None:
+def verify_manifest(directory: Path) -> tuple[str, ...]:
     """Raise :class:`ModelsCorrupt` unless every artefact is present and matches the manifest,
-    and the models were trained on this service's spectrum definition."""
+    and the models were trained on this service's spectrum definition. Returns the artefacts
+    checked: the required ones and the optional ones the manifest records (an optional file it
+    does not record is not to be loaded)."""
     manifest = directory / MANIFEST_FILE
     if not manifest.exists():
         raise ModelsCorrupt(f"{manifest} is missing: the artefacts cannot be checked")
@@ -46,9 +51,11 @@ def verify_manifest(directory: Path) -> None:
             f"{spectrum_definition()}: retrain them (make models) or serve the matching version"
         )
     recorded = content["sha256"]
-    for name in ARTEFACTS:
+    checked = (*ARTEFACTS, *(name for name in OPTIONAL_ARTEFACTS if name in recorded))
+    for name in checked:
         path = directory / name
         if not path.exists():
             raise ModelsCorrupt(f"{name} is missing from {directory}")
         if digest(path) != recorded.get(name):
             raise ModelsCorrupt(f"{name} does not match its checksum in {MANIFEST_FILE}")
+    return checked

@@ -13,7 +13,16 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 
-from app.contract import INTERVAL_Z, LOCALIZER_FILE, LOCALIZER_INPUTS, MASK_THRESHOLD, UNION_FILE, union_feeds
+from app.contract import (
+    INTERVAL_Z,
+    LOCALIZER_FILE,
+    LOCALIZER_INPUTS,
+    MASK_THRESHOLD,
+    RECONSTRUCTION_FILE,
+    RECONSTRUCTION_INPUTS,
+    UNION_FILE,
+    union_feeds,
+)
 from app.geometry.laplacian import mesh_operators
 from app.inference.manifest import verify_manifest
 from app.inference.spectra import InvalidSpectrum
@@ -73,10 +82,11 @@ def _session(path: Path, threads: int) -> ort.InferenceSession:
 
 
 class SpectralModels:
-    """Union operator, localizer and template from one models directory."""
+    """Union operator, localizer and template from one models directory, and the shape decoder
+    when the directory has one (its manifest records it)."""
 
     def __init__(self, directory: Path, threads: int = 1) -> None:
-        verify_manifest(directory)
+        checked = verify_manifest(directory)
         self.template = Template.load(directory)
         self.union_session = _session(directory / UNION_FILE, threads)
         self.localizer_session = _session(directory / LOCALIZER_FILE, threads)
@@ -88,7 +98,14 @@ class SpectralModels:
             raise ValueError("union operator and localizer disagree on k")
         # The lumped mass of the spectrum code: the same area weights the models were scored with.
         self.vertex_area = mesh_operators(self.template.vertices, self.template.faces).mass.diagonal()
-        digest = hashlib.sha256((directory / UNION_FILE).read_bytes() + (directory / LOCALIZER_FILE).read_bytes())
+        self.decoder_session = None
+        if RECONSTRUCTION_FILE in checked:
+            self.decoder_session = _session(directory / RECONSTRUCTION_FILE, threads)
+            decoded = self.decoder_session.get_outputs()[0].shape
+            if self.decoder_session.get_inputs()[0].shape[1] != self.k or decoded[1] != vertex_count:
+                raise ValueError("the shape decoder does not read this k or write this template")
+        served = [UNION_FILE, LOCALIZER_FILE] + ([RECONSTRUCTION_FILE] if self.decoder_session else [])
+        digest = hashlib.sha256(b"".join((directory / name).read_bytes() for name in served))
         self.version = digest.hexdigest()[:12]  # content hash: two replicas agree iff they serve the same models
 
     def union(self, spectra: list[np.ndarray]) -> UnionEstimate:
@@ -111,3 +128,13 @@ class SpectralModels:
         coverage = {name: float(share) for name, share in zip(PART_NAMES, shares, strict=True)}
         area = self.vertex_area
         return Region(np.flatnonzero(inside), float(area[inside].sum() / area.sum()), coverage)
+
+    def reconstruct(self, spectrum: np.ndarray) -> np.ndarray:
+        """(V, 3) the rest-pose body, in metres on the template's topology, whose complete spectrum
+        this is. Raises LookupError when these models have no decoder."""
+        if self.decoder_session is None:
+            raise LookupError("these models have no shape decoder")
+        feeds = {RECONSTRUCTION_INPUTS[0]: spectrum[None].astype(np.float32)}
+        (vertices,) = self.decoder_session.run(None, feeds)
+        _require_finite(vertices)
+        return vertices[0].astype(np.float64)

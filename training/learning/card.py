@@ -276,10 +276,15 @@ def render(metrics: dict, command: str) -> str:
 
 def update_card(path: Path, metrics: dict, command: str) -> None:
     """Replace the generated section of the card (or append one)."""
+    replace_block(path, BEGIN, END, render(metrics, command))
+
+
+def replace_block(path: Path, begin: str, end: str, block: str) -> None:
+    """Put ``block`` (which starts with ``begin`` and ends with ``end``) where those markers are
+    in the file, or append it: each generated section of the card has its own pair."""
     text = path.read_text() if path.exists() else ""
-    block = render(metrics, command)
-    if BEGIN in text and END in text:
-        text = text[: text.index(BEGIN)] + block + text[text.index(END) + len(END) :]
+    if begin in text and end in text:
+        text = text[: text.index(begin)] + block + text[text.index(end) + len(end) :]
     else:
         text = text.rstrip() + "\n\n" + block + "\n"
     path.write_text(text)

@@ -14,9 +14,18 @@ import onnx
 import onnxruntime as ort
 import torch
 
-from app.contract import LOCALIZER_INPUTS, LOCALIZER_OUTPUTS, UNION_INPUTS, UNION_OUTPUTS, union_feeds
+from app.contract import (
+    LOCALIZER_INPUTS,
+    LOCALIZER_OUTPUTS,
+    RECONSTRUCTION_INPUTS,
+    RECONSTRUCTION_OUTPUTS,
+    UNION_INPUTS,
+    UNION_OUTPUTS,
+    union_feeds,
+)
 from training.learning.localizer_net import Localizer
 from training.learning.union_net import UnionOperator
+from training.reconstruction.decoder import SpectrumDecoder
 
 OPSET = 18
 SOURCE_METADATA = "pkg.torch.onnx.stack_trace"  # per node: where in our Python it was traced
@@ -57,6 +66,11 @@ def export_localizer(model: Localizer, path: Path) -> None:
     _export(model, (example,), path, LOCALIZER_INPUTS, LOCALIZER_OUTPUTS)
 
 
+def export_decoder(model: SpectrumDecoder, path: Path) -> None:
+    example = torch.linspace(0, 60, model.config.k).repeat(2, 1)
+    _export(model, (example,), path, RECONSTRUCTION_INPUTS, RECONSTRUCTION_OUTPUTS)
+
+
 def session(path: Path) -> ort.InferenceSession:
     return ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
 
@@ -70,9 +84,19 @@ def union_parity(model: UnionOperator, path: Path, a: np.ndarray, b: np.ndarray)
 
 
 def localizer_parity(model: Localizer, path: Path, spectra: np.ndarray) -> float:
+    return _spectrum_graph_parity(model, path, LOCALIZER_INPUTS[0], spectra)
+
+
+def decoder_parity(model: SpectrumDecoder, path: Path, spectra: np.ndarray) -> float:
+    return _spectrum_graph_parity(model, path, RECONSTRUCTION_INPUTS[0], spectra)
+
+
+def _spectrum_graph_parity(model: torch.nn.Module, path: Path, name: str, spectra: np.ndarray) -> float:
+    """Parity of a graph with one input, a batch of spectra, and one output."""
+    spectra = spectra.astype(np.float32)
     with torch.no_grad():
         expected = model.eval()(torch.as_tensor(spectra)).numpy()
-    (got,) = session(path).run(None, {LOCALIZER_INPUTS[0]: spectra.astype(np.float32)})
+    (got,) = session(path).run(None, {name: spectra})
     return _relative(got, expected)
 
 

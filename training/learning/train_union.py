@@ -254,3 +254,12 @@ def train_union(
     calibrate(model, validation.a, validation.b, validation.union, remeshed, bodies, settings.sigma_floors)
     model.cpu().eval()
     return model
+
+
+def load_operator(data: SpectralData, checkpoint: Path) -> UnionOperator:
+    """A finished run's operator at its kept epoch, on the CPU, for its means (σ uncalibrated):
+    e.g. to predict pairs leave-one-body-out (:func:`predict` with ``bodies``) for another model."""
+    state = torch.load(checkpoint, map_location="cpu", weights_only=False)
+    model = build_operator(data.pairs.rows(memory_rows(data)), UnionConfig(**state["config"]["model"]))
+    model.load_state_dict(state["best_weights"])
+    return model.eval()

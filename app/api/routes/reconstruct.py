@@ -1,0 +1,110 @@
+"""``POST /v1/reconstruct``: the scanned person's body, rebuilt from the union of the scans' spectra.
+
+The union of the operands (as ``/v1/union`` computes it) is read as a complete body's spectrum
+and decoded to that body in the rest pose, on the template's topology (the decoder in
+``models/reconstruction.onnx``: a linear shape basis and a network, see the model card). The
+loop is closed on the spectrum: the rebuilt body goes through the same solver workers as an
+upload, and its own spectrum comes back beside the one it was decoded from, so a client sees
+how far to trust it. A union of parts that do not cover the body is decoded all the same (it
+is a smaller body's spectrum to the decoder); the gap between the two spectra shows it.
+"""
+
+import time
+from typing import Annotated, Literal
+
+import anyio
+import numpy as np
+import trimesh
+from fastapi import APIRouter, Query, Request, Response
+from pydantic import Field
+
+from app.api.deps import ModelsDep, SettingsDep
+from app.api.examples import success
+from app.api.metrics import INFERENCE
+from app.api.operands import FilesField, ScaleQuery, SpectraField, UnitsQuery
+from app.api.problems import ProblemError, problem_responses
+from app.api.routes.unions import UNION_PROBLEMS, UnionResponse
+from app.api.solver import SolverPool
+from app.api.unions import union_of_operands
+from app.geometry.pipeline import SpectrumOptions
+from app.inference.body import body_height, spectrum_gap, surface_area
+from app.inference.models import SpectralModels
+
+router = APIRouter(tags=["unions"])
+VERTEX_DECIMALS = 5  # 10 µm: far below the decoder's error, and it keeps the JSON small
+
+
+class ReconstructResponse(UnionResponse):
+    height_m: float = Field(description="The rebuilt body's height (extent along the template's up axis, z).")
+    area_m2: float = Field(description="The rebuilt body's surface area.")
+    vertices: list[list[float]] = Field(
+        description="The rebuilt body's vertices in the rest pose, metres, in the template's vertex order "
+        "(its faces are the template's: ask for format=ply for the mesh)."
+    )
+    body_eigenvalues: list[float] = Field(
+        description="The rebuilt body's own spectrum, 1/m², by the same engine as /v1/spectrum."
+    )
+    spectrum_relative_error: float = Field(
+        description="Mean relative difference of λ₂…λ_k between the rebuilt body's spectrum and the union's "
+        "(λ₁ of a closed body is 0): the decoder's own check, ~2–3 % on complete spectra."
+    )
+
+
+def body_mesh(models: SpectralModels, vertices: np.ndarray) -> bytes:
+    """Binary PLY of a rebuilt body (the template's faces)."""
+    return trimesh.Trimesh(vertices, models.template.faces, process=False).export(file_type="ply")
+
+
+@router.post(
+    "/reconstruct",
+    response_model=ReconstructResponse,
+    responses={
+        **UNION_PROBLEMS,
+        **problem_responses(501),
+        200: {"content": {"application/ply": {}, **success("reconstruct")[200]["content"]}},
+    },
+)
+async def reconstruct(
+    request: Request,
+    settings: SettingsDep,
+    models: ModelsDep,
+    files: FilesField = None,
+    spectra: SpectraField = None,
+    units: UnitsQuery = "m",
+    scale: ScaleQuery = None,
+    format: Annotated[
+        Literal["json", "ply"],
+        Query(description="ply: the rebuilt body as a mesh (height, area and the spectrum gap in X- headers)."),
+    ] = "json",
+) -> ReconstructResponse | Response:
+    """The complete body of the person the operands were scanned from, in the rest pose, up to pose."""
+    if models.decoder_session is None:
+        raise ProblemError(
+            501, "reconstruction-unavailable", "Reconstruction unavailable", "these models have no shape decoder"
+        )
+    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale)
+    started = time.perf_counter()
+    vertices = await anyio.to_thread.run_sync(models.reconstruct, outcome.result.eigenvalues)
+    INFERENCE.labels("decoder").observe(time.perf_counter() - started)
+    mesh = await anyio.to_thread.run_sync(body_mesh, models, vertices)
+    solver: SolverPool = request.app.state.solver
+    report = await solver.solve(mesh, "ply", SpectrumOptions(k=models.k))
+    body_spectrum = np.asarray(report.eigenvalues, dtype=np.float64)
+    height, area = body_height(vertices), surface_area(vertices, models.template.faces)
+    gap = spectrum_gap(body_spectrum, outcome.result.eigenvalues)
+    if format == "ply":
+        headers = {
+            "content-disposition": "inline; filename=body.ply",
+            "x-height-m": f"{height:.4f}",
+            "x-area-m2": f"{area:.4f}",
+            "x-spectrum-relative-error": f"{gap:.4f}",
+        }
+        return Response(mesh, media_type="application/ply", headers=headers)
+    return ReconstructResponse(
+        **outcome.fields(models),
+        height_m=height,
+        area_m2=area,
+        vertices=np.round(vertices, VERTEX_DECIMALS).tolist(),
+        body_eigenvalues=body_spectrum.tolist(),
+        spectrum_relative_error=gap,
+    )

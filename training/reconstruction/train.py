@@ -1,0 +1,128 @@
+"""Train the spectrum decoder on anny bodies and on the union operator's own full-body unions.
+
+Rows are (spectrum, identity): every posed complete spectrum of the bodies build, and the
+operator's predicted unions of the benchmark's full-coverage training pairs, predicted
+leave-one-body-out as a new person's would be, so the decoder meets the union's error in
+training (the issue's "(b)"). The target is always the identity's rest-pose body. A tenth of the
+bodies build's identities is held out for the epoch kept; the test identities are the benchmark's
+unknown ones, which neither this model nor the union operator ever saw.
+"""
+
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from training.learning.data import SpectralData
+from training.learning.fit import LoopSettings, Objective, fit, seed_everything
+from training.learning.train_union import load_operator, memory_rows, predict
+from training.reconstruction.bodies import BODIES_FILE
+from training.reconstruction.decoder import DecoderConfig, ShapeBasis, SpectrumDecoder, spectral_features
+
+HELD_OUT = 0.1  # of the bodies build's identities, for validation
+
+
+@dataclass(frozen=True)
+class DecoderTraining(LoopSettings):
+    epochs: int = 150
+    batch: int = 128
+    learning_rate: float = 2e-3
+    first_restart: int = 150
+    patience: int = 40
+    jitter: float = 0.01  # relative input noise: what a union's error and a re-meshing add
+    union_rows: int = 4000  # predicted full-body unions of training pairs (0: none)
+
+
+@dataclass(frozen=True)
+class DecoderRows:
+    """Spectra (n, k) and the index of each one's target body in ``rest`` (m, V, 3)."""
+
+    spectra: np.ndarray
+    target: np.ndarray
+    rest: np.ndarray
+
+
+def data_set_rest_bodies(data: SpectralData) -> np.ndarray:
+    """(identities, V, 3) the benchmark's identities in their rest pose (each one's first shape)."""
+    shapes = np.load(data.root / "work" / "shapes.npy", mmap_mode="r")
+    return np.asarray(shapes[:: data.shapes_per_identity], dtype=np.float32)
+
+
+def union_rows(data: SpectralData, union_checkpoint: Path, count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(spectra, identity) of ``count`` full-coverage training pairs' unions, as the operator
+    predicts them for a body whose pairs it never saw."""
+    pairs = data.pairs
+    chosen = np.flatnonzero((pairs.split == "train") & (pairs.scenario == "full"))
+    chosen = np.sort(np.random.default_rng(seed).choice(chosen, min(count, len(chosen)), replace=False))
+    rows = pairs.rows(chosen)
+    operator = load_operator(data, union_checkpoint)
+    memory = pairs.rows(memory_rows(data))
+    unions, _ = predict(operator, rows.a, rows.b, bodies=(memory.shape_a, rows.shape_a))
+    return unions, data.identity_of(rows.shape_a)
+
+
+def _tensor(array: np.ndarray) -> torch.Tensor:
+    return torch.as_tensor(array, dtype=torch.float32)
+
+
+def split_bodies(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(training, validation) identity indices of the bodies build."""
+    order = np.random.default_rng(seed).permutation(count)
+    held = max(1, int(round(HELD_OUT * count)))
+    return np.sort(order[held:]), np.sort(order[:held])
+
+
+def _rows(spectra: np.ndarray, identities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every pose's spectrum of ``identities`` (spectra: (m, poses, k)), with its identity."""
+    poses = spectra.shape[1]
+    return spectra[identities].reshape(-1, spectra.shape[2]), np.repeat(identities, poses)
+
+
+def vertex_error(predicted: torch.Tensor, truth: torch.Tensor) -> torch.Tensor:
+    """(n,) mean Euclidean vertex error in metres (no alignment: same topology, same frame)."""
+    return torch.linalg.vector_norm(predicted - truth, dim=-1).mean(-1)
+
+
+def train_decoder(
+    bodies_dir: Path,
+    checkpoint: Path,
+    settings: DecoderTraining,
+    config: DecoderConfig,
+    data: SpectralData | None = None,
+    union_checkpoint: Path | None = None,
+) -> SpectrumDecoder:
+    """Fit the basis on the training identities, train the network, return its best epoch."""
+    generator = seed_everything(settings.seed)
+    arrays = np.load(bodies_dir / BODIES_FILE)
+    rest, spectra = arrays["rest"].astype(np.float64), arrays["spectra"]
+    train_ids, validation_ids = split_bodies(len(rest), settings.seed)
+    basis = ShapeBasis.fit(rest[train_ids], config.components)
+    train_spectra, train_target = _rows(spectra, train_ids)
+    targets = basis.coefficients(rest)
+    if data is not None and union_checkpoint is not None and settings.union_rows:
+        unions, identity = union_rows(data, union_checkpoint, settings.union_rows, settings.seed)
+        train_spectra = np.concatenate([train_spectra, unions])
+        train_target = np.concatenate([train_target, len(rest) + identity])
+        targets = np.concatenate([targets, basis.coefficients(data_set_rest_bodies(data).astype(np.float64))])
+    features = spectral_features(_tensor(train_spectra)).numpy()
+    model = SpectrumDecoder(replace(config, k=spectra.shape[2]), basis, features.mean(0), features.std(0))
+    weights = _tensor(basis.scales**2)
+    x, y = _tensor(train_spectra), _tensor(targets)[_tensor(train_target).long()]
+    validation_spectra, validation_target = _rows(spectra, validation_ids)
+    validation_x, validation_truth = _tensor(validation_spectra), _tensor(rest[validation_target])
+
+    def batch_loss(rows: torch.Tensor) -> torch.Tensor:
+        noisy = x[rows] * (1 + settings.jitter * torch.randn(x[rows].shape, generator=generator))
+        # The squared vertex error, up to the basis's constant residual: components are orthonormal.
+        return ((model.coefficients(noisy) - y[rows]).pow(2) * weights).sum(-1).mean()
+
+    @torch.no_grad()
+    def validate() -> float:
+        model.eval()
+        return float(vertex_error(model(validation_x), validation_truth).mean()) * 1e3
+
+    objective = Objective("decoder", len(x), batch_loss, validate, lambda mm: f"{mm:.2f} mm")
+    run_config = {"model": config.as_dict(), "training": asdict(settings)}
+    fit(model, objective, settings, checkpoint, run_config, generator)
+    return model.eval()
