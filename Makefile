@@ -5,7 +5,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: run test test-train lint bench dataset train models
+.PHONY: run test test-train lint bench dataset train decoder models
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -32,7 +32,11 @@ dataset: $(BIN)/.train  ## the benchmark data set (PRESET=tiny|standard|large)
 train: $(BIN)/.train  ## train, export, evaluate on a built data set (PRESET=tiny|standard)
 	$(BIN)/spectral-unions-train train --data data/$(or $(PRESET),standard) --runs runs/$(or $(PRESET),standard) --models models --preset $(or $(PRESET),standard)
 
-models: dataset train  ## everything from scratch: data → training → evaluation → export
+decoder: $(BIN)/.train  ## the shape decoder (spectrum → body): anny bodies, training, export, evaluation
+	$(BIN)/spectral-unions-train build-bodies --preset $(or $(PRESET),standard) --out data/bodies-$(or $(PRESET),standard)
+	$(BIN)/spectral-unions-train train-decoder --bodies data/bodies-$(or $(PRESET),standard) --data data/$(or $(PRESET),standard) --union-run runs/$(or $(PRESET),standard)/union.pt --runs runs/$(or $(PRESET),standard) --models models --preset $(or $(PRESET),standard)
+
+models: dataset train decoder  ## everything from scratch: data → training → evaluation → export
 
 lint: $(BIN)/.installed
 	$(BIN)/ruff check app training tests benchmarks

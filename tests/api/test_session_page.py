@@ -83,13 +83,18 @@ def browser():
     driver.quit()
 
 
-def _expected_region(base: str, scans: list[Path]) -> dict:
-    """What the API says of the same session, asked directly: each part's spectrum, then the union."""
+def _session_spectra(base: str, scans: list[Path]) -> str:
+    """Each part's spectrum as the API computes it, as a ``spectra`` form field."""
     spectra = [
         httpx.post(f"{base}/v1/spectrum", files={"file": (p.name, p.read_bytes())}, timeout=60).json()["eigenvalues"]
         for p in scans
     ]
-    return httpx.post(f"{base}/v1/localize", data={"spectra": json.dumps(spectra)}, timeout=60).json()
+    return json.dumps(spectra)
+
+
+def _expected_region(base: str, scans: list[Path]) -> dict:
+    """What the API says of the same session's union, asked directly."""
+    return httpx.post(f"{base}/v1/localize", data={"spectra": _session_spectra(base, scans)}, timeout=60).json()
 
 
 def _drawn_share(element) -> float:
@@ -131,6 +136,12 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
     greyish = ((np.ptp(pixels, axis=1) < 12) & (pixels[:, 0] < 225) & (pixels[:, 0] > 60)).mean()
     assert reddish > 0.02 and greyish > 0.001  # covered and missing, in their two colours
     assert len(browser.find_elements(By.CSS_SELECTOR, "#matches li")) == 5
+    rebuilt = httpx.post(
+        f"{base}/v1/reconstruct", params={"format": "ply"}, data={"spectra": _session_spectra(base, scans)}, timeout=60
+    )
+    note = browser.find_element(By.ID, "rebuilt-note")
+    assert note.get_attribute("data-height") == f"{float(rebuilt.headers['x-height-m']):.4f}"
+    assert _drawn_share(browser.find_element(By.ID, "rebuilt")) > 0.03  # the rebuilt body is drawn
 
     if os.environ.get("SESSION_SCREENSHOT"):
         browser.save_screenshot(os.environ["SESSION_SCREENSHOT"])

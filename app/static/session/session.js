@@ -1,6 +1,7 @@
 // The scanning-session page: each dropped scan is solved once by POST /v1/spectrum; after
 // that only spectra are sent. After every scan the page asks /v1/localize (JSON and the
-// coloured template as PLY) and /v1/retrieve for the union of all parts so far.
+// coloured template as PLY), /v1/retrieve and /v1/reconstruct (the rebuilt body as PLY, its
+// height and spectrum check in headers) for the union of all parts so far.
 import * as THREE from "three";
 import { OrbitControls } from "/static/vendor/three/OrbitControls.js";
 import { PLYLoader } from "/static/vendor/three/PLYLoader.js";
@@ -55,15 +56,17 @@ async function refresh() {
   };
   $("parts").replaceChildren(...parts.map(item));
   setStatus(`Uniting ${parts.length} part${parts.length > 1 ? "s" : ""}…`);
-  const [region, ply, found] = await Promise.all([
+  const [region, ply, found, rebuilt] = await Promise.all([
     fetch("/v1/localize", { method: "POST", body: spectraForm() }).then(answer),
     fetch("/v1/localize?format=ply", { method: "POST", body: spectraForm() }).then((r) => r.arrayBuffer()),
     fetch("/v1/retrieve?top=5", { method: "POST", body: spectraForm() }).then(answer),
+    fetch("/v1/reconstruct?format=ply", { method: "POST", body: spectraForm() }),
   ]);
   plot(region);
-  showBody(ply);
+  covered.show(ply);
   showCoverage(region);
   showMatches(found);
+  await showRebuilt(rebuilt);
   document.body.dataset.parts = String(parts.length); // what the browser test waits for
   setStatus(`${parts.length} part${parts.length > 1 ? "s" : ""}; union covers ${(100 * region.area_fraction).toFixed(1)} % of the body.`);
 }
@@ -94,35 +97,61 @@ function plot(union) {
   );
 }
 
-const renderer = new THREE.WebGLRenderer({ canvas: $("body"), antialias: true, preserveDrawingBuffer: true });
-const scene = new THREE.Scene();
-scene.background = new THREE.Color(0xf4f4f4);
-scene.add(new THREE.HemisphereLight(0xffffff, 0x888888, 2.2));
-const light = new THREE.DirectionalLight(0xffffff, 1.2);
-light.position.set(1, 2, 3);
-scene.add(light);
-const camera = new THREE.PerspectiveCamera(35, 520 / 420, 0.01, 100);
-const controls = new OrbitControls(camera, renderer.domElement);
-controls.addEventListener("change", () => renderer.render(scene, camera));
-let mesh = null;
+// A mesh viewer on one canvas: the first mesh frames the camera, later ones replace it in place.
+function viewer(canvas, material) {
+  const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+  const scene = new THREE.Scene();
+  scene.background = new THREE.Color(0xf4f4f4);
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x888888, 2.2));
+  const light = new THREE.DirectionalLight(0xffffff, 1.2);
+  light.position.set(1, 2, 3);
+  scene.add(light);
+  const camera = new THREE.PerspectiveCamera(35, canvas.width / canvas.height, 0.01, 100);
+  const controls = new OrbitControls(camera, renderer.domElement);
+  controls.addEventListener("change", () => renderer.render(scene, camera));
+  let mesh = null;
+  return {
+    show(buffer) {
+      const geometry = new PLYLoader().parse(buffer);
+      geometry.computeVertexNormals();
+      if (mesh) {
+        scene.remove(mesh);
+        mesh.geometry.dispose();
+      } else {
+        geometry.computeBoundingSphere();
+        const { center, radius } = geometry.boundingSphere;
+        controls.target.copy(center);
+        camera.up.set(0, 0, 1); // bodies stand along +z
+        camera.position.set(center.x, center.y - 3.2 * radius, center.z);
+        controls.update();
+      }
+      mesh = new THREE.Mesh(geometry, material);
+      scene.add(mesh);
+      renderer.render(scene, camera);
+    },
+  };
+}
 
-function showBody(buffer) {
-  const geometry = new PLYLoader().parse(buffer);
-  geometry.computeVertexNormals();
-  if (mesh) {
-    scene.remove(mesh);
-    mesh.geometry.dispose();
-  } else {
-    geometry.computeBoundingSphere();
-    const { center, radius } = geometry.boundingSphere;
-    controls.target.copy(center);
-    camera.up.set(0, 0, 1); // the template body stands along +z
-    camera.position.set(center.x, center.y - 3.2 * radius, center.z);
-    controls.update();
+const covered = viewer($("body"), new THREE.MeshLambertMaterial({ vertexColors: true }));
+const rebuiltView = viewer($("rebuilt"), new THREE.MeshLambertMaterial({ color: 0xc8a07a }));
+
+async function showRebuilt(response) {
+  if (response.status === 501) {
+    $("rebuilt-note").textContent = "These models have no shape decoder.";
+    return;
   }
-  mesh = new THREE.Mesh(geometry, new THREE.MeshLambertMaterial({ vertexColors: true }));
-  scene.add(mesh);
-  renderer.render(scene, camera);
+  if (!response.ok) {
+    $("rebuilt-note").textContent = (await answer(response).catch((error) => error)).message;
+    return;
+  }
+  rebuiltView.show(await response.arrayBuffer());
+  const height = Number(response.headers.get("x-height-m"));
+  const gap = Number(response.headers.get("x-spectrum-relative-error"));
+  const note = $("rebuilt-note");
+  note.dataset.height = height.toFixed(4);
+  note.textContent = `Height ${(100 * height).toFixed(1)} cm; its own spectrum is ${(100 * gap).toFixed(1)} % from the union's`
+    + (gap > 0.1 ? ": not a complete body's spectrum yet, do not trust this body." : ".");
+  note.classList.toggle("warning", gap > 0.1);
 }
 
 function showCoverage(region) {
