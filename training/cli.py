@@ -40,13 +40,20 @@ def build_bodies_command(
     preset: Annotated[str, typer.Option(help="tiny or standard.")] = "standard",
     seed: Annotated[int, typer.Option()] = 0,
     workers: Annotated[int | None, typer.Option(help="Local processes (default: all cores).")] = None,
+    pairs: Annotated[
+        bool, typer.Option(help="Also one pair of parts covering each body (for --preset standard-body-unions).")
+    ] = False,
+    template: Annotated[Path, typer.Option(help="The template the parts are cut on (template.npz).")] = Path("models"),
 ) -> None:
     """Sample anny bodies for the shape decoder: rest-pose vertices and posed complete spectra."""
     from training.reconstruction.bodies import BODIES_PRESETS, build_bodies
+    from training.reconstruction.unions import build_body_unions
 
     if preset not in BODIES_PRESETS:
         raise typer.BadParameter(f"unknown preset {preset!r}")
     typer.echo(build_bodies(BODIES_PRESETS[preset], out, seed=seed, workers=workers))
+    if pairs:
+        typer.echo(build_body_unions(out, template, seed=seed, workers=workers))
 
 
 DataOption = Annotated[Path, typer.Option(help="A built data set directory.")]

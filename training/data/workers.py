@@ -31,7 +31,7 @@ def sampler_of(template_dir: str) -> RegionSampler:
 
 
 @lru_cache(maxsize=2)
-def _mapped(path: str) -> np.ndarray:
+def mapped(path: str) -> np.ndarray:
     """A saved array, memory-mapped once per worker process."""
     return np.load(path, mmap_mode="r")
 
@@ -65,7 +65,7 @@ def draw_masks(template_dir: str, seed: int, chunk: int, kind: str, count: int) 
 def draw_sessions(template_dir: str, shapes_path: str, seed: int, chunk: int, shapes: np.ndarray) -> dict:
     """A scanning session around each of ``shapes``, packed (count, views, bytes), from the chunk's stream."""
     sampler = sampler_of(template_dir)
-    bodies = _mapped(shapes_path)
+    bodies = mapped(shapes_path)
     rng = chunk_stream(seed, "session", chunk)
     n = len(sampler.template.vertices)
     masks = np.zeros((len(shapes), SESSION_VIEWS, (n + 7) // 8), np.uint8)
@@ -84,8 +84,8 @@ def solve_chunk(
 ) -> np.ndarray:
     """Spectra (len(tasks), k) of (shape, mask) rows of ``tasks`` in their variants."""
     template = Template.load(Path(template_dir))
-    shapes = _mapped(shapes_path)
-    packed = _mapped(masks_path)
+    shapes = mapped(shapes_path)
+    packed = mapped(masks_path)
     n = len(template.vertices)
     out = np.empty((len(tasks), k))
     for row, ((shape, mask), variant) in enumerate(zip(tasks, variants, strict=True)):

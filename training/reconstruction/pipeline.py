@@ -33,6 +33,8 @@ DECODER_PRESETS = {
         DecoderConfig(components=8, width=32),
     ),
     "standard": (DecoderTraining(), DecoderConfig()),
+    # The comparison: the bodies build's own pairs' unions as rows too (needs `build-bodies --pairs`).
+    "standard-body-unions": (DecoderTraining(body_unions=True), DecoderConfig()),
 }
 
 
