@@ -30,6 +30,7 @@ MAX_FORM_FIELDS = MAX_OPERANDS + 8
 # uvicorn's own logger: its handler is the one configured when the service runs under uvicorn.
 STARTUP_LOG = logging.getLogger("uvicorn.error")
 MAX_FORM_FIELD_BYTES = 1024 * 1024
+API_PREFIX = "/v1"
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -75,6 +76,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         capacity=settings.solver_concurrency + settings.max_queued_solves,
         byte_budget=settings.max_inflight_upload_bytes,
         max_body_bytes=settings.max_upload_bytes,
+        solving_paths=frozenset({API_PREFIX + reconstruct.ROUTE}),
     )
     app.add_middleware(
         UploadLimitMiddleware, max_bytes=settings.max_upload_bytes, body_timeout_s=settings.body_timeout_seconds
@@ -84,7 +86,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     install_pages(app)
     app.include_router(health.router)
     app.include_router(metrics_router)
-    app.include_router(spectrum.router, prefix="/v1")
+    app.include_router(spectrum.router, prefix=API_PREFIX)
     for routes in (unions, localize, reconstruct, models, retrieve, shapes):
-        app.include_router(routes.router, prefix="/v1")
+        app.include_router(routes.router, prefix=API_PREFIX)
     return app

@@ -8,6 +8,9 @@ is one too and passes in milliseconds) is counted in on its headers, whole: at m
 ``capacity`` such requests are in flight (solving or waiting for a solver), and their declared
 bodies together stay under ``byte_budget`` (a chunked body, of unknown length, is charged the
 upload cap). The rest get 503 ``overloaded`` with ``Retry-After`` at once, their bodies unread.
+A route that solves a shape of its own whatever its body holds (``/v1/reconstruct`` checks the
+body it rebuilt) is counted in the same way on any body, URL-encoded spectra included, so that
+no request reaches the solvers' queue uncounted.
 """
 
 from starlette.types import ASGIApp, Receive, Scope, Send
@@ -20,8 +23,16 @@ from app.api.solver import RETRY_AFTER_SECONDS
 class AdmissionMiddleware:
     """Pure ASGI middleware around the app; see the module docstring."""
 
-    def __init__(self, app: ASGIApp, capacity: int, byte_budget: int, max_body_bytes: int) -> None:
+    def __init__(
+        self,
+        app: ASGIApp,
+        capacity: int,
+        byte_budget: int,
+        max_body_bytes: int,
+        solving_paths: frozenset[str] = frozenset(),
+    ) -> None:
         self.app = app
+        self.solving_paths = solving_paths
         self.capacity = capacity
         self.byte_budget = byte_budget
         self.max_body_bytes = max_body_bytes
@@ -30,7 +41,8 @@ class AdmissionMiddleware:
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         headers = dict(scope["headers"]) if scope["type"] == "http" else {}
-        if not headers.get(b"content-type", b"").lower().startswith(b"multipart/form-data"):
+        multipart = headers.get(b"content-type", b"").lower().startswith(b"multipart/form-data")
+        if not (multipart or (scope["type"] == "http" and scope["path"] in self.solving_paths)):
             await self.app(scope, receive, send)
             return
         charge = _declared_length(headers, self.max_body_bytes)

@@ -5,10 +5,12 @@ body arrives: a client that has sent only its headers gets its 503, and one that
 through its body gets a 408 and gives its place back.
 """
 
+import json
 import socket
 import time
 
 import httpx
+import numpy as np
 import pytest
 
 from tests.api.servers import start, wait_ready
@@ -134,3 +136,21 @@ def test_a_body_that_stalls_is_answered_408_and_its_place_is_freed(server):
         assert response.status_code == 200, response.text
     finally:
         _release(server, holders)
+
+
+def test_a_reconstruction_is_counted_in_even_with_url_encoded_spectra(server):
+    """/v1/reconstruct solves the body it rebuilt whatever its body holds: with every place taken
+    it is refused on its headers, while a spectra-only union (no solve) still passes."""
+    spectra = {"spectra": json.dumps([np.cumsum(np.linspace(0, 4, 20)).tolist()])}
+    holders = _held(server, CAPACITY)
+    try:
+        before = _solves(server)
+        refused = httpx.post(f"http://127.0.0.1:{server}/v1/reconstruct", data=spectra, timeout=30)
+        assert refused.status_code == 503 and refused.json()["type"] == "/problems/overloaded", refused.text
+        assert httpx.post(f"http://127.0.0.1:{server}/v1/union", data=spectra, timeout=30).status_code == 200
+        assert _solves(server) == before
+    finally:
+        _release(server, holders)
+    answered = httpx.post(f"http://127.0.0.1:{server}/v1/reconstruct", data=spectra, timeout=60)
+    assert answered.status_code == 200, answered.text
+    assert _solves(server) == before + 1

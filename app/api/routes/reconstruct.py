@@ -31,6 +31,7 @@ from app.inference.body import body_height, spectrum_gap, surface_area
 from app.inference.models import SpectralModels
 
 router = APIRouter(tags=["unions"])
+ROUTE = "/reconstruct"  # every request solves the body it rebuilt: admitted like an upload (app.main)
 VERTEX_DECIMALS = 5  # 10 µm: far below the decoder's error, and it keeps the JSON small
 # The rebuilt body's spectrum is within ~2 % of a complete body's and ~4 % of a two-part union's
 # on average (model card); a union of scans that leave part of the body unseen is ~80 % away.
@@ -59,7 +60,7 @@ def body_mesh(models: SpectralModels, vertices: np.ndarray) -> bytes:
 
 
 @router.post(
-    "/reconstruct",
+    ROUTE,
     response_model=ReconstructResponse,
     responses={
         **UNION_PROBLEMS,
