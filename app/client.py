@@ -20,6 +20,7 @@ import httpx
 from app.api.problems import PROBLEM_MEDIA_TYPE, Problem
 from app.api.routes.localize import LocalizeResponse
 from app.api.routes.models import ModelsResponse
+from app.api.routes.reconstruct import ReconstructResponse
 from app.api.routes.retrieve import RetrieveResponse
 from app.api.routes.shapes import ShapeOut, ShapePage
 from app.api.routes.unions import UnionResponse
@@ -114,6 +115,19 @@ class Client:
     ) -> LocalizeResponse:
         """The union, its region on the template body and the covered share of each body part."""
         return LocalizeResponse(**self._operands("/v1/localize", files, spectra, _params(units=units, scale=scale)))
+
+    def reconstruct(
+        self,
+        files: Sequence[Scan] = (),
+        spectra: Sequence[Sequence[float]] = (),
+        *,
+        units: Units = "m",
+        scale: float | None = None,
+    ) -> ReconstructResponse:
+        """The person's body rebuilt from the union's spectrum (rest pose, template topology), with
+        its height, area and its own spectrum as the check."""
+        params = _params(units=units, scale=scale)
+        return ReconstructResponse(**self._operands("/v1/reconstruct", files, spectra, params))
 
     def retrieve(
         self,

@@ -52,6 +52,15 @@ def test_localize_and_retrieve_answer_as_the_raw_endpoints_do(service, scans, cl
     assert [m.id for m in matches] == [m["id"] for m in raw_matches]
 
 
+def test_a_reconstruction_answers_as_the_raw_endpoint_does(service, client):
+    body = sphere(3)
+    spectra = [list(mesh_spectrum(body, SpectrumOptions(k=20)).eigenvalues)]
+    rebuilt = service.reconstruct(spectra=spectra)
+    raw = client.post("/v1/reconstruct", data={"spectra": str(spectra)}).json()
+    assert rebuilt.vertices == raw["vertices"] and rebuilt.body_eigenvalues == raw["body_eigenvalues"]
+    assert rebuilt.height_m == raw["height_m"] and rebuilt.warnings == raw["warnings"]
+
+
 def test_a_stored_shape_is_listed_retrieved_first_and_deleted(service):
     ball = trimesh.creation.icosphere(subdivisions=3)
     stored = service.add_shape(("ball.ply", ball.export(file_type="ply")), "ball", units="cm")
