@@ -51,11 +51,6 @@ def _body() -> BodyModel:
     return BodyModel()
 
 
-def rest_pose(body: BodyModel) -> np.ndarray:
-    """(1, bones, 4, 4) the identity rotations: anny's rest pose."""
-    return np.tile(np.eye(4), (1, len(body.bones), 1, 1))
-
-
 @threadpool_limits.wrap(limits=1)
 def _one_body(phenotype: dict[str, float], label: str, seed: tuple[int, ...], poses: int, k: int) -> dict:
     """Rest-pose vertices and the complete spectrum in each of ``poses`` valid poses."""

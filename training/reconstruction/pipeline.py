@@ -11,6 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from app.contract import RECONSTRUCTION_FILE
 from app.inference.manifest import write_manifest
@@ -71,11 +72,9 @@ def run_decoder_pipeline(
     reference = (spectra[train_ids].reshape(-1, spectra.shape[2]), np.repeat(rest[train_ids], spectra.shape[1], 0))
     mean_body = decoder.mean.numpy().reshape(-1, 3).astype(np.float64)
 
+    @torch.no_grad()
     def decode(queries: np.ndarray) -> np.ndarray:
-        import torch
-
-        with torch.no_grad():
-            return decoder(torch.as_tensor(queries, dtype=torch.float32)).numpy().astype(np.float64)
+        return decoder(torch.as_tensor(queries, dtype=torch.float32)).numpy().astype(np.float64)
 
     metrics = {
         "sets": evaluate_decoder(

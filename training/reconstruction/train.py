@@ -41,15 +41,6 @@ class DecoderTraining(LoopSettings):
     body_unions: bool = False
 
 
-@dataclass(frozen=True)
-class DecoderRows:
-    """Spectra (n, k) and the index of each one's target body in ``rest`` (m, V, 3)."""
-
-    spectra: np.ndarray
-    target: np.ndarray
-    rest: np.ndarray
-
-
 def data_set_rest_bodies(data: SpectralData) -> np.ndarray:
     """(identities, V, 3) the benchmark's identities in their rest pose (each one's first shape)."""
     shapes = np.load(data.root / "work" / "shapes.npy", mmap_mode="r")

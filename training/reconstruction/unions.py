@@ -38,10 +38,11 @@ def _pair_spectra(template_dir: str, rest_path: str, seed: int, k: int, body: in
 def build_body_unions(bodies_dir: Path, template_dir: Path, seed: int = 0, workers: int | None = None) -> Path:
     """Write ``unions.npz``: parts ``a``, ``b`` (n, k) of one pair per body, and ``body`` (n,)."""
     arrays = np.load(bodies_dir / BODIES_FILE)
+    rest = arrays["rest"]  # decompressed once
     rest_path = bodies_dir / REST_FILE
-    np.save(rest_path, arrays["rest"])
+    np.save(rest_path, rest)
     k = arrays["spectra"].shape[2]
-    bodies = np.arange(len(arrays["rest"]))
+    bodies = np.arange(len(rest))
     context = multiprocessing.get_context("spawn")  # no torch state inherited (see bodies.py)
     with ProcessPoolExecutor(workers, mp_context=context) as pool:
         jobs = [pool.submit(_pair_spectra, str(template_dir), str(rest_path), seed, k, int(b)) for b in bodies]
