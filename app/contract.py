@@ -15,7 +15,8 @@ UNION_OUTPUTS = ("union", "sigma")  # float32 (batch, k): the union's eigenvalue
 LOCALIZER_INPUTS = ("spectrum",)  # float32 (batch, k)
 LOCALIZER_OUTPUTS = ("probability",)  # float32 (batch, template vertices)
 RECONSTRUCTION_FILE = "reconstruction.onnx"  # optional: served when present (POST /v1/reconstruct)
-RECONSTRUCTION_INPUTS = ("spectrum",)  # float32 (batch, k): a complete body's spectrum, 1/m²
+# float32 (batch, k) each, 1/m²: a complete body's spectrum and its σ (all 0: a measured spectrum, not a union)
+RECONSTRUCTION_INPUTS = ("spectrum", "sigma")
 RECONSTRUCTION_OUTPUTS = ("vertices",)  # float32 (batch, template vertices, 3): its rest-pose body, metres
 MASK_THRESHOLD = 0.5  # a template vertex is in the region when the localizer's probability reaches this
 INTERVAL_Z = 1.6449  # σ is calibrated so that union ± INTERVAL_Z·σ holds 90 % of held-out eigenvalues

@@ -129,12 +129,14 @@ class SpectralModels:
         area = self.vertex_area
         return Region(np.flatnonzero(inside), float(area[inside].sum() / area.sum()), coverage)
 
-    def reconstruct(self, spectrum: np.ndarray) -> np.ndarray:
+    def reconstruct(self, spectrum: np.ndarray, sigma: np.ndarray) -> np.ndarray:
         """(V, 3) the rest-pose body, in metres on the template's topology, whose complete spectrum
-        this is. Raises LookupError when these models have no decoder."""
+        this is, known to ``sigma`` (a union's σ; zero for a measured spectrum). Raises
+        LookupError when these models have no decoder."""
         if self.decoder_session is None:
             raise LookupError("these models have no shape decoder")
-        feeds = {RECONSTRUCTION_INPUTS[0]: spectrum[None].astype(np.float32)}
+        inputs = (spectrum[None].astype(np.float32), sigma[None].astype(np.float32))
+        feeds = dict(zip(RECONSTRUCTION_INPUTS, inputs, strict=True))
         (vertices,) = self.decoder_session.run(None, feeds)
         _require_finite(vertices)
         return vertices[0].astype(np.float64)

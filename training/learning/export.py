@@ -68,7 +68,7 @@ def export_localizer(model: Localizer, path: Path) -> None:
 
 def export_decoder(model: SpectrumDecoder, path: Path) -> None:
     example = torch.linspace(0, 60, model.config.k).repeat(2, 1)
-    _export(model, (example,), path, RECONSTRUCTION_INPUTS, RECONSTRUCTION_OUTPUTS)
+    _export(model, (example, 0.1 * example), path, RECONSTRUCTION_INPUTS, RECONSTRUCTION_OUTPUTS)
 
 
 def session(path: Path) -> ort.InferenceSession:
@@ -87,8 +87,13 @@ def localizer_parity(model: Localizer, path: Path, spectra: np.ndarray) -> float
     return _spectrum_graph_parity(model, path, LOCALIZER_INPUTS[0], spectra)
 
 
-def decoder_parity(model: SpectrumDecoder, path: Path, spectra: np.ndarray) -> float:
-    return _spectrum_graph_parity(model, path, RECONSTRUCTION_INPUTS[0], spectra)
+def decoder_parity(model: SpectrumDecoder, path: Path, spectra: np.ndarray, sigma: np.ndarray) -> float:
+    """Largest relative difference between onnxruntime and PyTorch on these spectra and σ."""
+    inputs = [x.astype(np.float32) for x in (spectra, sigma)]
+    with torch.no_grad():
+        expected = model.eval()(*(torch.as_tensor(x) for x in inputs)).numpy()
+    (got,) = session(path).run(None, dict(zip(RECONSTRUCTION_INPUTS, inputs, strict=True)))
+    return _relative(got, expected)
 
 
 def _spectrum_graph_parity(model: torch.nn.Module, path: Path, name: str, spectra: np.ndarray) -> float:

@@ -6,6 +6,13 @@ template's topology reproduces unseen bodies to a fraction of a millimetre with 
 components (the card has the curve). The network maps the spectrum's scale-carrying log
 eigenvalues (λ₂…λ_k; λ₁ of a closed body is 0) to those coefficients; the basis is part of the
 graph, so the service gets vertices from one ONNX call and needs neither torch nor anny.
+
+Two networks share the basis, and σ (the graph's second input) picks one per row: a measured
+spectrum (σ = 0: one complete scan) goes to a network trained on measured spectra alone, a
+predicted union (σ > 0) to one trained on the operator's unions as well. One network for both
+has to compromise: trained on both kinds, it rebuilt measured bodies at 4.0 mm where one trained
+on measured spectra alone gets 2.9, and the latter rebuilt two-part unions at 16 mm instead of 11.
+Fed σ as an input instead, one network did no better on either (4.0 mm, 14.7 mm; model card).
 """
 
 from dataclasses import asdict, dataclass
@@ -58,19 +65,13 @@ def spectral_features(spectra: Tensor) -> Tensor:
     return torch.log(torch.clamp(spectra[:, 1:], min=FLOOR))
 
 
-class SpectrumDecoder(nn.Module):
-    """(batch, k) complete spectra in 1/m² → (batch, V, 3) rest-pose vertices in metres."""
+class SpectrumNetwork(nn.Module):
+    """(batch, k) complete spectra in 1/m² → (batch, C) whitened basis coefficients."""
 
-    def __init__(self, config: DecoderConfig, basis: ShapeBasis, feature_mean: np.ndarray, feature_std: np.ndarray):
+    def __init__(self, config: DecoderConfig, feature_mean: np.ndarray, feature_std: np.ndarray):
         super().__init__()
-        self.config = config
         self.register_buffer("feature_mean", torch.as_tensor(feature_mean, dtype=torch.float32))
         self.register_buffer("feature_std", torch.as_tensor(feature_std, dtype=torch.float32))
-        self.vertices = len(basis.mean) // 3
-        self.register_buffer("mean", torch.as_tensor(basis.mean, dtype=torch.float32))
-        # Each component pre-multiplied by its spread: the network works in whitened coefficients.
-        scaled = basis.components * basis.scales[:, None]
-        self.register_buffer("components", torch.as_tensor(scaled, dtype=torch.float32))
         layers: list[nn.Module] = []
         inputs = config.k - 1
         for _ in range(config.depth - 1):
@@ -79,10 +80,32 @@ class SpectrumDecoder(nn.Module):
         layers.append(nn.Linear(inputs, config.components))
         self.network = nn.Sequential(*layers)
 
-    def coefficients(self, spectra: Tensor) -> Tensor:
-        """(batch, C) whitened basis coefficients."""
+    def forward(self, spectra: Tensor) -> Tensor:
         return self.network((spectral_features(spectra) - self.feature_mean) / self.feature_std)
 
-    def forward(self, spectra: Tensor) -> Tensor:
-        flat = self.mean + self.coefficients(spectra) @ self.components
+
+class SpectrumDecoder(nn.Module):
+    """(batch, k) complete spectra in 1/m² and their σ → (batch, V, 3) rest-pose vertices in metres.
+
+    A row whose σ is all zero (measured) is read by ``measured``, any other (a predicted union)
+    by ``predicted``.
+    """
+
+    def __init__(self, config: DecoderConfig, basis: ShapeBasis, measured: SpectrumNetwork, predicted: SpectrumNetwork):
+        super().__init__()
+        self.config = config
+        self.vertices = len(basis.mean) // 3
+        self.register_buffer("mean", torch.as_tensor(basis.mean, dtype=torch.float32))
+        # Each component pre-multiplied by its spread: the networks work in whitened coefficients.
+        scaled = basis.components * basis.scales[:, None]
+        self.register_buffer("components", torch.as_tensor(scaled, dtype=torch.float32))
+        self.measured, self.predicted = measured, predicted
+
+    def coefficients(self, spectra: Tensor, sigma: Tensor) -> Tensor:
+        """(batch, C) whitened basis coefficients, each row from the network for its kind."""
+        is_measured = (sigma == 0).all(-1, keepdim=True)
+        return torch.where(is_measured, self.measured(spectra), self.predicted(spectra))
+
+    def forward(self, spectra: Tensor, sigma: Tensor) -> Tensor:
+        flat = self.mean + self.coefficients(spectra, sigma) @ self.components
         return flat.reshape(-1, self.vertices, 3)  # the batch left free: a dynamic axis in ONNX

@@ -3,7 +3,8 @@
 Queries, all of the benchmark's unknown identities (unknown men, unknown women, children),
 whom neither the decoder nor the union operator saw: (a) the true complete spectrum of every
 posed body; (b) the served operator's union of two parts that cover the body (Test A's
-full-coverage pairs); (c) the union of a Test C scanning session, its five views chained. Each
+full-coverage pairs); (c) the union of a Test C scanning session, its five views chained, σ
+carried as the service carries it. The decoder reads each with its σ (0 for (a)). Each
 rebuilt body is compared with the person's rest-pose body after a rigid alignment (rotation and
 translation, Kabsch): mean and 95th-percentile vertex error, height and area error. The loop is
 closed on the spectrum: the rebuilt body's own spectrum, by the service's engine, against the
@@ -21,13 +22,15 @@ from threadpoolctl import threadpool_limits
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
 from app.inference.body import body_height, spectrum_gap, surface_area
+from app.inference.models import chained_sigma
 from app.retrieval.distance import features
 from training.data.spectra import MESH
 from training.learning.data import SpectralData
 
 UNKNOWN_GROUPS = ("unknown_man", "unknown_woman", "child")
-Decoder = Callable[[np.ndarray], np.ndarray]  # (n, k) spectra → (n, V, 3) bodies
-Union = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (n, k), (n, k) → (n, k)
+Decoder = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (n, k) spectra, their σ → (n, V, 3) bodies
+Union = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # (n, k), (n, k) → union, σ
+Queries = tuple[np.ndarray, np.ndarray, np.ndarray]  # spectra (n, k), their σ (n, k), identity (n,)
 
 
 def rigidly_aligned(moving: np.ndarray, fixed: np.ndarray) -> np.ndarray:
@@ -74,15 +77,16 @@ def identity_groups(data: SpectralData) -> np.ndarray:
     return np.array([i["group"] for i in json.loads((data.root / "work" / "identities.json").read_text())])
 
 
-def query_sets(data: SpectralData, union: Union) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """(spectra, identity) of each query set (a), (b), (c) of the module docstring."""
+def query_sets(data: SpectralData, union: Union) -> dict[str, Queries]:
+    """The queries of each set (a), (b), (c) of the module docstring."""
     arrays = np.load(data.root / "dataset.npz")
     groups = identity_groups(data)
     unknown = np.flatnonzero(np.isin(groups, UNKNOWN_GROUPS))
     complete = (arrays["spectrum_mask"] == 0) & (arrays["spectrum_variant"] == MESH)
     shapes = arrays["spectrum_shape"][complete]
     keep = np.isin(data.identity_of(shapes), unknown)
-    sets = {"true_spectrum": (arrays["spectra"][complete][keep], data.identity_of(shapes[keep]))}
+    measured = arrays["spectra"][complete][keep]
+    sets = {"true_spectrum": (measured, np.zeros_like(measured), data.identity_of(shapes[keep]))}
     pairs = data.pairs
     chosen = pairs.rows(
         np.flatnonzero(
@@ -90,12 +94,14 @@ def query_sets(data: SpectralData, union: Union) -> dict[str, tuple[np.ndarray, 
             & np.isin(pairs.group, UNKNOWN_GROUPS)
         )
     )  # fmt: skip
-    sets["two_part_union"] = (union(chosen.a, chosen.b), data.identity_of(chosen.shape_a))
+    sets["two_part_union"] = (*union(chosen.a, chosen.b), data.identity_of(chosen.shape_a))
     chains = data.chains
-    current = chains.views[:, 0]
+    current, sigma = chains.views[:, 0], np.zeros_like(chains.views[:, 0])
     for view in range(1, chains.views.shape[1]):
-        current = union(current, chains.views[:, view])
-    sets["session_chain"] = (current, data.identity_of(chains.shape))
+        step, step_sigma = union(current, chains.views[:, view])
+        sigma = chained_sigma(current, sigma, step, step_sigma)
+        current = step
+    sets["session_chain"] = (current, sigma, data.identity_of(chains.shape))
     return sets
 
 
@@ -116,9 +122,9 @@ def evaluate_decoder(
     faces = data.template.faces
     library = features(reference[0])
     table = {}
-    for name, (spectra, identity) in query_sets(data, union).items():
+    for name, (spectra, sigma, identity) in query_sets(data, union).items():
         truth = rest[identity]
-        decoded = decode(spectra)
+        decoded = decode(spectra, sigma)
         nearest = np.argmin(((features(spectra)[:, None] - library[None]) ** 2).sum(-1), axis=1)
         table[name] = {
             "queries": len(spectra),

@@ -71,22 +71,25 @@ def run_decoder_pipeline(
     union, _ = served_predictors(models)
     reference = (spectra[train_ids].reshape(-1, spectra.shape[2]), np.repeat(rest[train_ids], spectra.shape[1], 0))
     mean_body = decoder.mean.numpy().reshape(-1, 3).astype(np.float64)
+    measured = spectra[:, 0]
+    parity_sigma = 0.05 * measured * (np.arange(len(measured)) % 2)[:, None]  # measured and predicted rows
 
     @torch.no_grad()
-    def decode(queries: np.ndarray) -> np.ndarray:
-        return decoder(torch.as_tensor(queries, dtype=torch.float32)).numpy().astype(np.float64)
+    def decode(queries: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+        inputs = (torch.as_tensor(x, dtype=torch.float32) for x in (queries, sigma))
+        return decoder(*inputs).numpy().astype(np.float64)
 
     metrics = {
         "sets": evaluate_decoder(
             data,
             decode,
-            lambda a, b: union(a, b)[0],
+            union,
             mean_body,
             reference,
             data_set_rest_bodies(data).astype(np.float64),
         ),
         "basis_mm": basis_curve(rest, seed),
-        "parity_max_relative": decoder_parity(decoder, models / RECONSTRUCTION_FILE, spectra[:, 0]),
+        "parity_max_relative": decoder_parity(decoder, models / RECONSTRUCTION_FILE, measured, parity_sigma),
         "config": config.as_dict() | {"k": decoder.config.k},
         "training_identities": len(train_ids),
         "seconds": {"training": round(trained - started, 1), "total": round(time.perf_counter() - started, 1)},

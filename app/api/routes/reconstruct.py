@@ -2,7 +2,10 @@
 
 The union of the operands (as ``/v1/union`` computes it) is read as a complete body's spectrum
 and decoded to that body in the rest pose, on the template's topology (the decoder in
-``models/reconstruction.onnx``: a linear shape basis and a network, see the model card). The
+``models/reconstruction.onnx``: a linear shape basis and two networks, see the model card). The
+union's σ goes with it: one operand is a measured spectrum (σ = 0), read by the network trained
+on measured spectra; a union of several is a prediction, read by the one that learned the
+operator's error. The
 loop is closed on the spectrum: the rebuilt body goes through the same solver workers as an
 upload, and its own spectrum comes back beside the one it was decoded from, so a client sees
 how far to trust it. A union of parts that do not cover the body is decoded all the same (it
@@ -50,7 +53,7 @@ class ReconstructResponse(UnionResponse):
     )
     spectrum_relative_error: float = Field(
         description="Mean relative difference of λ₂…λ_k between the rebuilt body's spectrum and the union's "
-        "(λ₁ of a closed body is 0): the decoder's own check, 1.5 % on complete bodies' spectra and 3.8 % on "
+        "(λ₁ of a closed body is 0): the decoder's own check, 1.3 % on complete bodies' spectra and 3.8 % on "
         "two-part unions on average (model card); over 10 % adds a warning."
     )
 
@@ -89,7 +92,7 @@ async def reconstruct(
         )
     outcome = await union_of_operands(request, settings, models, files, spectra, units, scale)
     started = time.perf_counter()
-    vertices = await anyio.to_thread.run_sync(models.reconstruct, outcome.result.eigenvalues)
+    vertices = await anyio.to_thread.run_sync(models.reconstruct, outcome.result.eigenvalues, outcome.result.sigma)
     INFERENCE.labels("decoder").observe(time.perf_counter() - started)
     mesh = await anyio.to_thread.run_sync(body_mesh, models, vertices)
     solver: SolverPool = request.app.state.solver

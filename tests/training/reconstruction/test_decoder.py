@@ -6,8 +6,14 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("onnxscript")
 
-from training.learning.export import decoder_parity, export_decoder  # noqa: E402
-from training.reconstruction.decoder import DecoderConfig, ShapeBasis, SpectrumDecoder  # noqa: E402
+from app.contract import RECONSTRUCTION_INPUTS  # noqa: E402
+from training.learning.export import decoder_parity, export_decoder, session  # noqa: E402
+from training.reconstruction.decoder import (  # noqa: E402
+    DecoderConfig,
+    ShapeBasis,
+    SpectrumDecoder,
+    SpectrumNetwork,
+)
 
 
 @pytest.fixture
@@ -31,14 +37,43 @@ def test_whitened_coefficients_have_unit_spread_on_the_bodies_fitted(bodies):
     np.testing.assert_allclose(coefficients.mean(0), 0.0, atol=1e-10)
 
 
-def test_the_exported_decoder_matches_pytorch_at_any_batch_size(bodies, tmp_path):
+def _decoder(bodies: np.ndarray, k: int = 20) -> SpectrumDecoder:
     torch.manual_seed(0)
-    k = 20
-    model = SpectrumDecoder(
-        DecoderConfig(k=k, components=3, width=16), ShapeBasis.fit(bodies, 3), np.zeros(k - 1), np.ones(k - 1)
-    )
-    export_decoder(model, tmp_path / "decoder.onnx")
-    spectra = np.sort(np.random.default_rng(1).uniform(0.5, 60, (5, k)), axis=1)
+    config = DecoderConfig(k=k, components=3, width=16)
+    measured, predicted = (SpectrumNetwork(config, np.zeros(k - 1), np.ones(k - 1)) for _ in range(2))
+    return SpectrumDecoder(config, ShapeBasis.fit(bodies, 3), measured, predicted).eval()
+
+
+def _spectra(count: int, k: int = 20) -> np.ndarray:
+    spectra = np.sort(np.random.default_rng(1).uniform(0.5, 60, (count, k)), axis=1)
     spectra[:, 0] = 0.0  # a closed body's λ₁
-    assert decoder_parity(model, tmp_path / "decoder.onnx", spectra) < 1e-5
-    assert model(torch.as_tensor(spectra, dtype=torch.float32)).shape == (5, 30, 3)
+    return spectra
+
+
+def test_the_exported_decoder_matches_pytorch_at_any_batch_size(bodies, tmp_path):
+    model = _decoder(bodies)
+    export_decoder(model, tmp_path / "decoder.onnx")
+    spectra = _spectra(5)
+    sigma = 0.05 * spectra * (np.arange(5) % 2)[:, None]  # measured and predicted rows
+    assert decoder_parity(model, tmp_path / "decoder.onnx", spectra, sigma) < 1e-5
+    shaped = model(*(torch.as_tensor(x, dtype=torch.float32) for x in (spectra, sigma)))
+    assert shaped.shape == (5, 30, 3)
+
+
+def test_a_measured_spectrum_is_read_by_the_measured_network_and_a_union_by_the_other(bodies, tmp_path):
+    """σ all zero picks the network trained on measured spectra; any σ > 0, even one eigenvalue's,
+    the union's. Checked on the exported graph, row by row in one batch."""
+    model = _decoder(bodies)
+    export_decoder(model, tmp_path / "decoder.onnx")
+    spectra = _spectra(3).astype(np.float32)
+    sigma = np.zeros_like(spectra)
+    sigma[1, 7] = 0.01  # one eigenvalue predicted: a union
+    sigma[2] = 0.05 * spectra[2]
+    feeds = dict(zip(RECONSTRUCTION_INPUTS, (spectra, sigma), strict=True))
+    (got,) = session(tmp_path / "decoder.onnx").run(None, feeds)
+    with torch.no_grad():
+        x = torch.as_tensor(spectra)
+        measured, predicted = model.measured(x), model.predicted(x)
+        expected = torch.stack([measured[0], predicted[1], predicted[2]]) @ model.components + model.mean
+    np.testing.assert_allclose(got.reshape(3, -1), expected.numpy(), rtol=1e-5, atol=1e-6)
+    assert not np.allclose(model.measured(x).detach().numpy(), model.predicted(x).detach().numpy())
