@@ -37,6 +37,7 @@ from torch import Tensor, nn
 
 EPSILON = 1e-3  # keeps the zero λ₁ of a closed (full-body) union finite in log space
 SIGMA_FLOOR = 1e-2  # the smallest relative σ before calibration (the pose noise floor is ~2 %)
+SHORTLIST = 128  # memory rows beyond those asked for whose float64 distance decides (UnionMemory)
 SHARPNESS = 20.0  # of the softplus that turns the monotone parametrization's signal into a decrease
 # The coincidence gate's starting width τ in z (RMS over the spectrum): a re-scan of one region
 # differs by ~1–2 % (the pose noise floor), two different parts by tens of per cent. Learned.
@@ -95,10 +96,16 @@ class UnionMemory(nn.Module):
     each pair is stored once. ``exclude`` (training only, (B, rows) boolean) hides memory rows
     from each query: those cut from the query's own body, its own pair and its siblings.
 
-    The search runs in float64: in float32 the expanded distance |k|² − 2q·k + |q|² loses ~1e-5
-    to cancellation, more than the gap between the nearest pairs of some queries, so PyTorch and
-    onnxruntime (whose float32 log and matmul round differently) picked different neighbours for
-    8 of 5 100 real queries. Keys are stored in float32 (the same bits in both) and widened.
+    The search is decided in float64: in float32 the expanded distance |k|² − 2q·k + |q|² loses
+    ~1e-5 to cancellation, more than the gap between the nearest pairs of some queries, so
+    PyTorch and onnxruntime (whose float32 log and matmul round differently) picked different
+    neighbours for 8 of 5 100 real queries. Keys are stored in float32 (the same bits in both)
+    and widened. But a float64 product with every key is slow in onnxruntime (3.7 ms per operand
+    order for 28 000 keys at batch 1, where float32 takes a tenth), so float32 distances only
+    shortlist :data:`SHORTLIST` more candidates than asked for (from the keys' mean, which keeps
+    float32's error far below the nearest gaps), and the float64 distances of those decide: the
+    same neighbours unless more than that many keys lie within float32's error of the last one
+    asked for.
     """
 
     def __init__(self, a: np.ndarray, b: np.ndarray, union: np.ndarray) -> None:
@@ -113,6 +120,13 @@ class UnionMemory(nn.Module):
         # break top-k ties differently. Far below any real gap (≤ 3e-8 in squared distance);
         # not part of the state, so it needs no retraining.
         self.register_buffer("tie_break", torch.arange(len(keys), dtype=torch.float64) * 1e-12, persistent=False)
+        # The shortlist's float32 copy, centred on the keys' mean: float32's cancellation error
+        # scales with the norms, and keys lie far closer to their mean than to the origin.
+        # The centred keys themselves are made in the graph (onnxruntime folds them once when it
+        # loads it): stored, they would double the file's largest constant.
+        centre = keys.mean(0)
+        self.register_buffer("centre", centre, persistent=False)
+        self.register_buffer("centred_norms", ((keys - centre) ** 2).sum(1), persistent=False)
 
     @staticmethod
     def queries(a: Tensor, b: Tensor) -> Tensor:
@@ -128,12 +142,25 @@ class UnionMemory(nn.Module):
         k = a.shape[1]
         forward = self.queries(a, b)
         backward = torch.cat([forward[:, k:], forward[:, :k]], dim=1)
-        keys = self.keys.double().T
-        distance = torch.minimum(self.key_norms - 2 * forward @ keys, self.key_norms - 2 * backward @ keys)
-        distance = distance + self.tie_break
+        # Squared distances from the keys' mean, the nearer operand order: float32 shortlists
+        # (each order's own query norm counts here: from the mean, the two orders' differ).
+        centred_keys = (self.keys - self.centre).T
+        centred = [(q - self.centre.double()).float() for q in (forward, backward)]
+        near = [(q**2).sum(1, keepdim=True) + self.centred_norms - 2 * q @ centred_keys for q in centred]
+        coarse = torch.minimum(*near)
         if exclude is not None:
-            distance = distance.masked_fill(exclude, torch.inf)
-        nearest, rows = torch.topk(distance, count, dim=1, largest=False)
+            coarse = coarse.masked_fill(exclude, torch.inf)
+        candidates = torch.topk(coarse, min(count + SHORTLIST, len(self.keys)), dim=1, largest=False)[1]
+        chosen = self.keys[candidates].double()  # (B, candidates, 2k)
+        distance = torch.minimum(
+            self.key_norms[candidates] - 2 * (forward[:, None, :] * chosen).sum(-1),
+            self.key_norms[candidates] - 2 * (backward[:, None, :] * chosen).sum(-1),
+        )
+        distance = distance + self.tie_break[candidates]
+        if exclude is not None:
+            distance = distance.masked_fill(exclude.gather(1, candidates), torch.inf)
+        nearest, picked = torch.topk(distance, count, dim=1, largest=False)
+        rows = candidates.gather(1, picked)
         # The query's own norm, summed per operand so that both orders give the same bits.
         query_norm = (forward[:, :k] ** 2).sum(1, keepdim=True) + (forward[:, k:] ** 2).sum(1, keepdim=True)
         distances = torch.sqrt(torch.clamp(nearest + query_norm, min=1e-8))  # finite gradient at 0

@@ -69,6 +69,33 @@ def test_memory_returns_the_nearest_other_pairs_in_order():
     torch.testing.assert_close(floors, torch.minimum(keys[..., :20], keys[..., 20:]))
 
 
+def test_a_large_memory_finds_the_pairs_a_full_float64_search_finds():
+    """400 stored pairs of nearly one spectrum twice (0.1 % apart, so either operand order may be
+    the nearer, and more near neighbours than the float32 shortlist holds), each stored twice,
+    among 1 600 pairs whose second part is 5× the first's eigenvalues: the neighbours and
+    distances are those of a float64 search over every row in both orders (ties to the earlier
+    row, by the memory's tie-break)."""
+    generator = torch.Generator().manual_seed(7)
+
+    def near(count: int) -> torch.Tensor:
+        return torch.sort(spectra(1, 20) * (1 + 1e-3 * torch.randn(count, 20, generator=generator)), dim=1).values
+
+    near_a, near_b = near(400), near(400)
+    near_a[1::2], near_b[1::2] = near_a[::2], near_b[::2]  # each pair stored twice
+    a, b = torch.cat([near_a, spectra(1600, 21)]), torch.cat([near_b, spectra(1600, 22) * 5])
+    memory = UnionMemory(a, b, spectra(2000, 23))
+    queries_a, queries_b = torch.cat([near(40), b[400::100]]), torch.cat([near(40), a[400::100] * 1.0001])
+    forward = memory.queries(queries_a, queries_b)
+    backward = torch.cat([forward[:, 20:], forward[:, :20]], dim=1)
+    keys = memory.keys.double().T
+    every_row = torch.minimum(memory.key_norms - 2 * forward @ keys, memory.key_norms - 2 * backward @ keys)
+    expected, rows = (every_row + memory.tie_break).topk(5, largest=False)
+    query_norm = (forward**2).sum(1, keepdim=True)
+    priors, distances, _ = memory(queries_a, queries_b, 5)
+    torch.testing.assert_close(priors, memory.unions[rows], rtol=0, atol=0)
+    torch.testing.assert_close(distances, (expected + query_norm).sqrt().float())
+
+
 @pytest.mark.parametrize("correction", CORRECTIONS)
 def test_an_untrained_operator_returns_the_prior(correction):
     """The correction starts at zero: before training, the operator is the nearest-pair lookup."""
