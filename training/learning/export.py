@@ -84,20 +84,20 @@ def union_parity(model: UnionOperator, path: Path, a: np.ndarray, b: np.ndarray)
 
 
 def localizer_parity(model: Localizer, path: Path, spectra: np.ndarray) -> float:
-    """Largest relative difference between onnxruntime and PyTorch on these spectra."""
-    spectra = spectra.astype(np.float32)
-    with torch.no_grad():
-        expected = model.eval()(torch.as_tensor(spectra)).numpy()
-    (got,) = session(path).run(None, {LOCALIZER_INPUTS[0]: spectra})
-    return _relative(got, expected)
+    return _graph_parity(model, path, LOCALIZER_INPUTS, (spectra,))
 
 
 def decoder_parity(model: SpectrumDecoder, path: Path, spectra: np.ndarray, sigma: np.ndarray) -> float:
-    """Largest relative difference between onnxruntime and PyTorch on these spectra and σ."""
-    inputs = [x.astype(np.float32) for x in (spectra, sigma)]
+    return _graph_parity(model, path, RECONSTRUCTION_INPUTS, (spectra, sigma))
+
+
+def _graph_parity(model: torch.nn.Module, path: Path, names: tuple[str, ...], arrays: tuple[np.ndarray, ...]) -> float:
+    """Largest relative difference between onnxruntime and PyTorch for a graph with one output,
+    on these inputs (in the graph's input order)."""
+    inputs = [x.astype(np.float32) for x in arrays]
     with torch.no_grad():
         expected = model.eval()(*(torch.as_tensor(x) for x in inputs)).numpy()
-    (got,) = session(path).run(None, dict(zip(RECONSTRUCTION_INPUTS, inputs, strict=True)))
+    (got,) = session(path).run(None, dict(zip(names, inputs, strict=True)))
     return _relative(got, expected)
 
 

@@ -55,6 +55,10 @@ class ShapeBasis:
         """(n, C) the whitened coefficients of (n, V, 3) bodies (their projection, / scales)."""
         return ((rest.reshape(len(rest), -1) - self.mean) @ self.components.T) / self.scales
 
+    def scaled_components(self) -> np.ndarray:
+        """(C, 3V) each component times its spread: what whitened coefficients multiply."""
+        return self.components * self.scales[:, None]
+
     def bodies(self, coefficients: np.ndarray) -> np.ndarray:
         """(n, V, 3) from whitened coefficients."""
         return (self.mean + (coefficients * self.scales) @ self.components).reshape(len(coefficients), -1, 3)
@@ -96,9 +100,8 @@ class SpectrumDecoder(nn.Module):
         self.config = config
         self.vertices = len(basis.mean) // 3
         self.register_buffer("mean", torch.as_tensor(basis.mean, dtype=torch.float32))
-        # Each component pre-multiplied by its spread: the networks work in whitened coefficients.
-        scaled = basis.components * basis.scales[:, None]
-        self.register_buffer("components", torch.as_tensor(scaled, dtype=torch.float32))
+        # The networks work in whitened coefficients.
+        self.register_buffer("components", torch.as_tensor(basis.scaled_components(), dtype=torch.float32))
         self.measured, self.predicted = measured, predicted
 
     def coefficients(self, spectra: Tensor, sigma: Tensor) -> Tensor:

@@ -164,7 +164,7 @@ class NetworkFitting:
         network = SpectrumNetwork(self.config, features.mean(0), features.std(0))
         weights = _tensor(basis.scales**2)
         x, y = _tensor(train_spectra), _tensor(basis.coefficients(self.bodies)[train_target])
-        mean, components = _tensor(basis.mean), _tensor(basis.components * basis.scales[:, None])
+        mean, components = _tensor(basis.mean), _tensor(basis.scaled_components())
         validation = [(_tensor(rows), _tensor(self.bodies[target])) for rows, target in checks]
 
         def batch_loss(rows: torch.Tensor) -> torch.Tensor:
