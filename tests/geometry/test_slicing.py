@@ -1,0 +1,107 @@
+"""Spectra solved in slices against the dense generalized eigenproblem, and slices that disagree."""
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from app.geometry.laplacian import Operators, mesh_operators
+from app.geometry.pencil import ShiftedPencil
+from app.geometry.slicing import InconsistentSlices, _interior_factor, sliced_eigenvalues
+from app.geometry.spectrum import SLICED_ABOVE, eigenvalues
+from app.geometry.topology import boundary_vertex_mask
+from tests.conftest import sphere
+
+
+def dense_spectrum(operators: Operators, fixed: np.ndarray | None, k: int) -> np.ndarray:
+    """The first ``k`` eigenvalues of the free vertices' (S, M) by LAPACK, the independent truth."""
+    free = np.ones(operators.mass.shape[0], dtype=bool) if fixed is None else ~fixed
+    stiffness = operators.stiffness[free][:, free].toarray()
+    mass = operators.mass[free][:, free].toarray()
+    return scipy.linalg.eigh(stiffness, mass, eigvals_only=True, subset_by_index=[0, k - 1])
+
+
+class CountingPencil(ShiftedPencil):
+    """A pencil that records the shifts it is factorized at."""
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.shifts: list[float] = []
+
+    def factor(self, shift):
+        self.shifts.append(shift)
+        return super().factor(shift)
+
+
+@pytest.fixture(scope="module")
+def closed_sphere() -> tuple[Operators, np.ndarray]:
+    """sphere(4) (2 562 vertices), whose eigenvalues come in tight clusters of 2l + 1."""
+    surface = sphere(4)
+    operators = mesh_operators(surface.vertices, surface.faces)
+    return operators, dense_spectrum(operators, None, 100)
+
+
+@pytest.mark.parametrize("size", [7, 12, 30])
+def test_clusters_cut_by_the_slices_come_out_whole(size, closed_sphere):
+    """Slice edges fall inside the sphere's clusters (9 at l = 2 … 19 at l = 9, split by the
+    discretization into sub-clusters 1e-4 apart): every member is found once, in order."""
+    operators, truth = closed_sphere
+    pencil = CountingPencil(operators, None)
+    values = sliced_eigenvalues(pencil, 100, size)
+    assert len(pencil.shifts) >= 3
+    np.testing.assert_allclose(values, truth, rtol=1e-8, atol=1e-10 * truth[-1])
+
+
+def test_a_dirichlet_patch_in_slices_matches_the_dense_solve(patch):
+    operators = mesh_operators(patch.vertices, patch.faces)
+    fixed = boundary_vertex_mask(patch.faces, len(patch.vertices))
+    pencil = CountingPencil(operators, fixed)
+    values = sliced_eigenvalues(pencil, 90, 20)
+    assert len(pencil.shifts) >= 3
+    np.testing.assert_allclose(values, dense_spectrum(operators, fixed, 90), rtol=1e-8)
+
+
+def test_the_service_path_slices_beyond_the_slice_size_and_agrees(closed_sphere):
+    operators, truth = closed_sphere
+    assert SLICED_ABOVE < 100
+    np.testing.assert_allclose(eigenvalues(operators, 100), truth, rtol=1e-8, atol=1e-10 * truth[-1])
+
+
+class DroppingPencil(ShiftedPencil):
+    """ARPACK as if it had converged to the wrong set around one interior shift: one eigenvalue
+    of that slice goes missing and the next-nearest takes its place."""
+
+    def nearest(self, factor, count, *, vectors=False, restarts=None):
+        values, functions = super().nearest(factor, count + 1, vectors=vectors, restarts=restarts)
+        if factor.shift > self.lowest_shift:
+            return np.delete(values, count // 2 - 1), None
+        return values[:count], functions
+
+
+def test_a_slice_that_missed_an_eigenvalue_is_caught_where_the_slices_overlap(closed_sphere):
+    operators, _ = closed_sphere
+    with pytest.raises(InconsistentSlices):
+        sliced_eigenvalues(DroppingPencil(operators, None), 100, 25)
+
+
+def test_slices_reaching_the_end_of_a_small_shapes_spectrum_stay_exact():
+    """42 vertices, 41 eigenvalues in slices of 16: the last slice's request is capped by the
+    pencil's size and the whole discrete spectrum but one comes out, each value once."""
+    surface = sphere(1)
+    operators = mesh_operators(surface.vertices, surface.faces)
+    truth = dense_spectrum(operators, None, 41)
+    values = sliced_eigenvalues(ShiftedPencil(operators, None), 41, 16)
+    np.testing.assert_allclose(values, truth, rtol=1e-8, atol=1e-10 * truth[-1])
+
+
+def test_the_service_falls_back_to_one_solve_when_slices_disagree(closed_sphere, monkeypatch):
+    operators, truth = closed_sphere
+    monkeypatch.setattr("app.geometry.spectrum.ShiftedPencil", DroppingPencil)
+    np.testing.assert_allclose(eigenvalues(operators, 100), truth, rtol=1e-8, atol=1e-10 * truth[-1])
+
+
+def test_a_shift_on_an_eigenvalue_is_refused_before_its_count_is_trusted(closed_sphere):
+    """LDLᵀ without pivoting at a shift equal to an eigenvalue (λ₂ of the sphere) has a zero
+    pivot up to rounding: the slice is refused (and the service solves in one piece)."""
+    operators, truth = closed_sphere
+    with pytest.raises(InconsistentSlices):
+        _interior_factor(ShiftedPencil(operators, None), float(truth[1]))
