@@ -68,7 +68,7 @@ def sliced_eigenvalues(pencil: ShiftedPencil, k: int, size: int = SLICE_SIZE) ->
         wanted = min(size, k - 1 - top)
         spacing = (values[top] - values[0]) / top
         factor = _interior_factor(pencil, values[top] + spacing * (wanted + 1) / 2)
-        first, block = _block_reaching(pencil, factor, top)
+        first, block = _block_reaching(pencil, factor, top, size)
         overlap = values[first : top + 1]
         if np.abs(block[: len(overlap)] - overlap).max() > OVERLAP_TOLERANCE * spacing:
             raise InconsistentSlices("two slices disagree where they overlap")
@@ -90,17 +90,19 @@ def _interior_factor(pencil: ShiftedPencil, shift: float) -> Factor:
     return factor
 
 
-def _block_reaching(pencil: ShiftedPencil, factor: Factor, top: int) -> tuple[int, np.ndarray]:
+def _block_reaching(pencil: ShiftedPencil, factor: Factor, top: int, size: int) -> tuple[int, np.ndarray]:
     """The eigenvalues nearest ``factor.shift`` and the index of the lowest, asking ARPACK for
     more until they reach down to index ``top`` and beyond it (or until ARPACK converges).
 
     As many are asked for as lie between the known ones and the shift, twice (the shift is meant
-    to sit in the middle of the slice), plus ``MARGIN``.
+    to sit in the middle of the slice), and at least a slice's ``size``, plus ``MARGIN``: a
+    clustered spectrum (a symmetric mesh's) can leave the shift in a gap with none below it, and
+    fewer cost ARPACK about as much (so the last slice, however few it still needs, asks as many).
     """
     unknown_below = factor.below - 1 - top
     if unknown_below < 0:
         raise InconsistentSlices("the shift lies below an eigenvalue already known")
-    count = 2 * unknown_below + MARGIN
+    count = max(2 * unknown_below, size) + MARGIN
     while True:
         count = min(count, pencil.size - 1)
         try:
