@@ -36,9 +36,9 @@ OVERLAP_TOLERANCE = 1e-6
 # ARPACK's implicit restarts allowed per slice. A slice converges in 1–3; one whose edge cuts an
 # exactly degenerate cluster (a symmetric mesh's) may never converge, and is asked again for more.
 SLICE_RESTARTS = 10
-# An interior shift's smallest |pivot| relative to its largest below which the shift is taken to
-# sit on an eigenvalue. Half a spacing from one, the ratio is ~1e-4 on the 13 k body.
-SINGULAR_PIVOT = 1e-12
+# An eigenvalue closer to an interior shift than this, relative to the spectrum's mean spacing,
+# makes that shift's count of the eigenvalues below it ambiguous (the sign of a pivot ~0).
+SINGULAR_DISTANCE = 1e-9
 
 
 class InconsistentSlices(Exception):
@@ -67,8 +67,14 @@ def sliced_eigenvalues(pencil: ShiftedPencil, k: int, size: int = SLICE_SIZE) ->
     while top < k - 1:
         wanted = min(size, k - 1 - top)
         spacing = (values[top] - values[0]) / top
-        factor = _interior_factor(pencil, values[top] + spacing * (wanted + 1) / 2)
-        first, block = _block_reaching(pencil, factor, top, size)
+        shift = values[top] + spacing * (wanted + 1) / 2
+        try:
+            factor = pencil.factor(shift)
+            first, block = _block_reaching(pencil, factor, top, size)
+        except SolverFailure as exc:  # LDLᵀ without pivoting, or ARPACK, broke down at this shift
+            raise InconsistentSlices(f"the slice at {shift:g} broke down: {exc}") from exc
+        if np.abs(block - factor.shift).min() < SINGULAR_DISTANCE * spacing:
+            raise InconsistentSlices(f"the shift {factor.shift:g} lies on an eigenvalue")
         overlap = values[first : top + 1]
         if np.abs(block[: len(overlap)] - overlap).max() > OVERLAP_TOLERANCE * spacing:
             raise InconsistentSlices("two slices disagree where they overlap")
@@ -76,19 +82,6 @@ def sliced_eigenvalues(pencil: ShiftedPencil, k: int, size: int = SLICE_SIZE) ->
         values[top + 1 : top + 1 + len(new)] = new
         top += len(new)
     return values
-
-
-def _interior_factor(pencil: ShiftedPencil, shift: float) -> Factor:
-    """The factorization at an interior shift, which LDLᵀ without pivoting must take without a
-    near-zero pivot (the shift on an eigenvalue) for its solves and its count to be trusted."""
-    try:
-        factor = pencil.factor(shift)
-        smallest, largest = factor.pivot_range
-    except SolverFailure as exc:
-        raise InconsistentSlices(f"no factorization at the shift {shift:g}") from exc
-    if smallest < SINGULAR_PIVOT * largest:
-        raise InconsistentSlices(f"the shift {shift:g} lies on an eigenvalue")
-    return factor
 
 
 def _block_reaching(pencil: ShiftedPencil, factor: Factor, top: int, size: int) -> tuple[int, np.ndarray]:

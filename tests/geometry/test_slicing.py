@@ -3,13 +3,16 @@
 import numpy as np
 import pytest
 import scipy.linalg
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
+from app.geometry.errors import GeometryError
 from app.geometry.laplacian import Operators, mesh_operators
 from app.geometry.pencil import ShiftedPencil
-from app.geometry.slicing import InconsistentSlices, _interior_factor, sliced_eigenvalues
-from app.geometry.spectrum import SLICED_ABOVE, eigenvalues
+from app.geometry.slicing import InconsistentSlices, sliced_eigenvalues
+from app.geometry.spectrum import SLICED_ABOVE, eigenpairs, eigenvalues
 from app.geometry.topology import boundary_vertex_mask
-from tests.conftest import sphere
+from tests.conftest import bumpy_patch, sphere
 
 
 def dense_spectrum(operators: Operators, fixed: np.ndarray | None, k: int) -> np.ndarray:
@@ -99,9 +102,52 @@ def test_the_service_falls_back_to_one_solve_when_slices_disagree(closed_sphere,
     np.testing.assert_allclose(eigenvalues(operators, 100), truth, rtol=1e-8, atol=1e-10 * truth[-1])
 
 
-def test_a_shift_on_an_eigenvalue_is_refused_before_its_count_is_trusted(closed_sphere):
-    """LDLᵀ without pivoting at a shift equal to an eigenvalue (λ₂ of the sphere) has a zero
-    pivot up to rounding: the slice is refused (and the service solves in one piece)."""
-    operators, truth = closed_sphere
-    with pytest.raises(InconsistentSlices):
-        _interior_factor(ShiftedPencil(operators, None), float(truth[1]))
+class LandingPencil(ShiftedPencil):
+    """Every interior shift moved onto the nearest true eigenvalue, as if its placement had
+    landed there: the count of eigenvalues below it is then a pivot's sign at rounding level."""
+
+    def __init__(self, operators, fixed, truth):
+        super().__init__(operators, fixed)
+        self.truth = truth
+
+    def factor(self, shift):
+        if shift > self.lowest_shift:
+            shift = float(self.truth[np.abs(self.truth - shift).argmin()])
+        return super().factor(shift)
+
+
+def test_a_shift_on_an_eigenvalue_is_refused_not_trusted(patch):
+    operators = mesh_operators(patch.vertices, patch.faces)
+    fixed = boundary_vertex_mask(patch.faces, len(patch.vertices))
+    truth = dense_spectrum(operators, fixed, 120)
+    with pytest.raises(InconsistentSlices, match="lies on an eigenvalue|broke down"):
+        sliced_eigenvalues(LandingPencil(operators, fixed, truth), 90, 20)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    st.integers(0, 10_000),
+    st.sampled_from([0.0, 0.01, 0.3, 1.0]),
+    st.integers(0, 40),
+    st.integers(SLICED_ABOVE + 1, 160),
+)
+def test_on_any_distorted_patch_slices_agree_with_one_solve(seed, jitter, collapsed, k):
+    """Vertices jittered by up to an edge length (slivers, folds) and collapsed onto a neighbour
+    (zero-area triangles): the service's sliced spectrum equals one ARPACK solve's, or both fail."""
+    rng = np.random.default_rng(seed)
+    mesh = bumpy_patch(seed % 7)
+    edge = np.linalg.norm(mesh.vertices[mesh.faces[:, 0]] - mesh.vertices[mesh.faces[:, 1]], axis=1).mean()
+    vertices = mesh.vertices + jitter * edge * rng.standard_normal(mesh.vertices.shape)
+    for face in rng.choice(len(mesh.faces), collapsed, replace=False):
+        a, b = mesh.faces[face, :2]
+        vertices[a] = vertices[b]
+    try:
+        operators = mesh_operators(vertices, mesh.faces)
+        fixed = boundary_vertex_mask(mesh.faces, len(vertices))
+        one_solve = eigenpairs(operators, k, fixed)[0]
+    except GeometryError:
+        with pytest.raises(GeometryError):
+            eigenvalues(mesh_operators(vertices, mesh.faces), k, fixed)
+        return
+    sliced = eigenvalues(operators, k, fixed)
+    np.testing.assert_allclose(sliced, one_solve, rtol=1e-8, atol=1e-10 * one_solve[-1])
