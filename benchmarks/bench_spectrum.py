@@ -66,13 +66,16 @@ def bodies(large: bool) -> dict[str, tuple[Mesh, np.ndarray | None]]:
     return shapes
 
 
-def median_ms(run: Callable[[], object], repeats: int) -> float:
-    times = []
+def interleaved_ms(runs: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
+    """Median milliseconds of each run, the runs taking turns within every repeat, so that a
+    drift in the machine's speed (this VM's varies by ~30 % over minutes) weighs on all alike."""
+    times: dict[str, list[float]] = {name: [] for name in runs}
     for _ in range(repeats):
-        started = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - started)
-    return 1e3 * statistics.median(times)
+        for name, run in runs.items():
+            started = time.perf_counter()
+            run()
+            times[name].append(time.perf_counter() - started)
+    return {name: 1e3 * statistics.median(values) for name, values in times.items()}
 
 
 def scipy_reference(mesh: Mesh, fixed: np.ndarray | None, k: int) -> np.ndarray:
@@ -107,16 +110,19 @@ def measure(mesh: Mesh, fixed: np.ndarray | None, k: int, repeats: int) -> dict[
     from plain SciPy."""
     v, f = mesh.vertices, mesh.faces
     operators = mesh_operators(v, f)
-    ours = {
-        "assembly": median_ms(lambda: mesh_operators(v, f), repeats),
-        "factorization": median_ms(lambda: factorization(operators, fixed), repeats),
-        "total": median_ms(lambda: eigenvalues(mesh_operators(v, f), k, fixed), repeats),
-    }
-    ours["iteration"] = ours["total"] - ours["assembly"] - ours["factorization"]
-    lapy_superlu = median_ms(lambda: lapy.Solver(lapy.TriaMesh(v, f)).eigs(k), repeats)
-    cholmod = median_ms(partial(lapy_cholmod, mesh, k), repeats)
+    times = interleaved_ms(
+        {
+            "assembly": partial(mesh_operators, v, f),
+            "factorization": partial(factorization, operators, fixed),
+            "total": lambda: eigenvalues(mesh_operators(v, f), k, fixed),
+            "lapy_superlu": lambda: lapy.Solver(lapy.TriaMesh(v, f)).eigs(k),
+            "lapy_cholmod": partial(lapy_cholmod, mesh, k),
+        },
+        repeats,
+    )
+    times["iteration"] = times["total"] - times["assembly"] - times["factorization"]
     deviation = relative_deviation(eigenvalues(operators, k, fixed), scipy_reference(mesh, fixed, k))
-    return {**ours, "lapy_superlu": lapy_superlu, "lapy_cholmod": cholmod, "deviation": deviation}
+    return {**times, "deviation": deviation}
 
 
 def over_http(mesh: Mesh, ks: list[int], repeats: int, port: int) -> None:
@@ -134,8 +140,8 @@ def over_http(mesh: Mesh, ks: list[int], repeats: int, port: int) -> None:
             for k in ks:
                 post = partial(http.post, url, params={"k": k}, files={"file": ("body.ply", data)})
                 served = np.array(post().raise_for_status().json()["eigenvalues"])
-                ours = median_ms(post, repeats)
-                cholmod = median_ms(partial(lapy_cholmod, mesh, k), repeats)
+                times = interleaved_ms({"ours": post, "cholmod": partial(lapy_cholmod, mesh, k)}, repeats)
+                ours, cholmod = times["ours"], times["cholmod"]
                 deviation = relative_deviation(served, eigenvalues(mesh_operators(mesh.vertices, mesh.faces), k))
                 print(
                     f"| closed body | {len(mesh.vertices)} | {k} | {ours:.0f} | {cholmod:.0f} | {cholmod / ours:.2f} "
