@@ -128,7 +128,7 @@ def measure(mesh: Mesh, fixed: np.ndarray | None, k: int, repeats: int) -> dict[
 def over_http(mesh: Mesh, ks: list[int], repeats: int, port: int) -> None:
     """``POST /v1/spectrum`` of ``mesh`` (PLY) to the service started on its embedded defaults,
     one client, against LaPy-CHOLMOD in process, as a Markdown table."""
-    from benchmarks.load import start_server
+    from benchmarks.load import start_server, stop_server
 
     data = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).export(file_type="ply")
     url = f"http://127.0.0.1:{port}/v1/spectrum"
@@ -149,8 +149,7 @@ def over_http(mesh: Mesh, ks: list[int], repeats: int, port: int) -> None:
                     flush=True,
                 )
     finally:
-        server.terminate()
-        server.wait(timeout=30)
+        stop_server(server)
 
 
 def main() -> None:

@@ -120,6 +120,14 @@ def start_server(port: int) -> subprocess.Popen:
     raise RuntimeError("the service did not become ready")
 
 
+def stop_server(server: subprocess.Popen) -> None:
+    """Stop a server of :func:`start_server` and remove its database."""
+    server.terminate()
+    server.wait(timeout=30)
+    for suffix in ("", "-wal", "-shm"):
+        Path(f"bench-load.sqlite{suffix}").unlink(missing_ok=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--url", help="an already running service (default: start one)")
@@ -153,10 +161,7 @@ def main() -> None:
         latency.append(together.summary("/v1/union, both uploaded"))
     finally:
         if server:
-            server.terminate()
-            server.wait(timeout=30)
-            for suffix in ("", "-wal", "-shm"):
-                Path(f"bench-load.sqlite{suffix}").unlink(missing_ok=True)
+            stop_server(server)
     models = SpectralModels(settings.models_dir)
     print(json.dumps({"cores": os.cpu_count(), "part_vertices": sizes, "concurrency": args.concurrency}, indent=1))
     print("| scenario | requests | ok | errors | throughput (req/s) | p50 ms | p95 ms | p99 ms |")
