@@ -165,8 +165,14 @@ def _load_with_trimesh(data: bytes, file_type: str, max_vertices: int) -> Shape:
         if cause is not None:
             raise cause from exc
         raise UnreadableFile(f"could not parse the {file_type} file: {exc}") from exc
-    faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
-    vertices = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+    faces, vertices = np.asarray(mesh.faces, dtype=np.int64), np.asarray(mesh.vertices, dtype=np.float64)
+    if vertices.ndim != 2 or vertices.shape[1] != 3 or (faces.size and (faces.ndim != 2 or faces.shape[1] != 3)):
+        # An OBJ line "v 0" leaves trimesh a (n, 1) or flat vertex array: no shape to read.
+        raise UnreadableFile(
+            f"the {file_type} file's vertices are not (x, y, z) triples or its faces not triangles "
+            f"(vertices {vertices.shape}, faces {faces.shape})"
+        )
+    faces = faces.reshape(-1, 3)
     if len(faces) == 0:
         return PointCloud(vertices)
     return Mesh(vertices, faces)

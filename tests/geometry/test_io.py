@@ -118,3 +118,15 @@ def test_ply_header_with_a_billion_vertices_is_refused_before_parsing():
     )
     with pytest.raises(TooManyVertices):
         load_shape(header + b"\0" * 120, "ply", max_vertices=CAP)
+
+
+@pytest.mark.parametrize(
+    "vertex_lines",
+    [
+        b"v 0\nv 0 0 0\nv 1 0 0\nv 0 1 0\n",  # one vertex of a single coordinate: trimesh keeps (n, 1)
+        b"v 0\n1 2 3\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 1\n",  # and a stray line (hypothesis found it)
+    ],
+)
+def test_an_obj_whose_vertices_are_not_triples_is_unreadable_not_a_crash(vertex_lines):
+    with pytest.raises(UnreadableFile, match="not \\(x, y, z\\) triples"):
+        load_shape(vertex_lines + b"f 2 3 4\n", "obj", max_vertices=CAP)
