@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from app.geometry.laplacian import mesh_operators
+from training.data.spectra import MESH
 from training.data.template import Template
 
 VALIDATION_FRACTION = 0.05
@@ -104,6 +105,13 @@ class SpectralData:
         whole = np.isfinite(chain_spectra).all(axis=(1, 2))
         views = (chain_spectra.shape[1] + 1) // 2
         self.chains = ChainTable(chain_spectra[whole, :views], chain_spectra[whole, views:], arrays["chains"][whole, 0])
+
+    def complete_spectra(self) -> tuple[np.ndarray, np.ndarray]:
+        """(shape indices, float64 spectra) of the complete posed bodies the build solved (the whole
+        template as mask, the mesh variant): ShapeDNA's stored shapes and the decoder's true spectra."""
+        arrays = np.load(self.root / "dataset.npz")
+        complete = (arrays["spectrum_mask"] == 0) & (arrays["spectrum_variant"] == MESH)
+        return arrays["spectrum_shape"][complete], arrays["spectra"][complete]
 
     def identity_of(self, shape: np.ndarray) -> np.ndarray:
         return shape // self.shapes_per_identity

@@ -31,10 +31,9 @@ def complete_shapes(data: SpectralData, workers: int | None = None) -> tuple[np.
     shapes_path = data.root / "work" / "shapes.npy"
     count = len(np.load(shapes_path, mmap_mode="r"))
     k = data.spectra.shape[1]
-    arrays = np.load(data.root / "dataset.npz")
-    known = (arrays["spectrum_mask"] == 0) & (arrays["spectrum_variant"] == MESH)
+    solved_shapes, solved = data.complete_spectra()
     spectra = np.full((count, k), np.nan)
-    spectra[arrays["spectrum_shape"][known]] = arrays["spectra"][known]
+    spectra[solved_shapes] = solved
     missing = np.flatnonzero(np.isnan(spectra).any(axis=1))
     with ProcessPoolExecutor(max_workers=workers) as pool:
         jobs = [pool.submit(_closed_spectrum, str(shapes_path), data.template.faces, int(s), k) for s in missing]

@@ -79,13 +79,10 @@ def identity_groups(data: SpectralData) -> np.ndarray:
 
 def query_sets(data: SpectralData, union: Union) -> dict[str, Queries]:
     """The queries of each set (a), (b), (c) of the module docstring."""
-    arrays = np.load(data.root / "dataset.npz")
-    groups = identity_groups(data)
-    unknown = np.flatnonzero(np.isin(groups, UNKNOWN_GROUPS))
-    complete = (arrays["spectrum_mask"] == 0) & (arrays["spectrum_variant"] == MESH)
-    shapes = arrays["spectrum_shape"][complete]
+    unknown = np.flatnonzero(np.isin(identity_groups(data), UNKNOWN_GROUPS))
+    shapes, spectra = data.complete_spectra()
     keep = np.isin(data.identity_of(shapes), unknown)
-    measured = arrays["spectra"][complete][keep]
+    measured = spectra[keep]
     sets = {"true_spectrum": (measured, np.zeros_like(measured), data.identity_of(shapes[keep]))}
     pairs = data.pairs
     chosen = pairs.rows(
