@@ -250,10 +250,11 @@ class EncoderLayer(nn.TransformerEncoderLayer):
 
     Why: exported, PyTorch's attention is ~40 nodes per layer of reshapes, transposes, squeezes
     and slices, and at batch 1 onnxruntime's time is per node: written out, the union graph
-    holds 442 nodes instead of 641 and runs in ~1.31 instead of ~1.50 ms
-    (`benchmarks/RESULTS.md`), computing the same (`tests/training/learning/test_union_net.py`
-    compares the two). Training keeps PyTorch's own attention, whose gradients the served
-    checkpoint was trained with; so do masks, which the operator never passes.
+    holds 470 nodes instead of 641 and runs in ~1.31 instead of ~1.50 ms
+    (`benchmarks/RESULTS.md`), computing the same to float32 rounding
+    (`tests/training/learning/test_models.py` compares the two). Training keeps PyTorch's own
+    attention, whose gradients the served checkpoint was trained with; so do masks, which the
+    operator never passes.
     """
 
     def _sa_block(
