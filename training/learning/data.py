@@ -45,11 +45,13 @@ class PairTable:
 
 @dataclass(frozen=True)
 class TripleTable:
-    """Chains (A ∪ B) ∪ C: spectra (t, k) of A, B, C, A ∪ B, A ∪ B ∪ C; ``test`` flags held-out ones."""
+    """Chains (A ∪ B) ∪ C: spectra (t, k) of A, B, C, A ∪ B, A ∪ B ∪ C; ``test`` flags held-out
+    ones; ``shape`` the posed body all three parts are cut from."""
 
     spectra: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
     test: np.ndarray
     union_mask: np.ndarray
+    shape: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -100,6 +102,7 @@ class SpectralData:
             spectra=tuple(s[finite] for s in chains),  # type: ignore[arg-type]
             test=arrays["triples"][finite, 0].astype(bool),
             union_mask=arrays["triples"][finite, 6],
+            shape=arrays["triples"][finite, 1],
         )
         chain_spectra = spectra[arrays["chain_spectra"]]  # (c, 9, k): 5 views, then 4 prefix unions
         whole = np.isfinite(chain_spectra).all(axis=(1, 2))

@@ -150,6 +150,7 @@ def run_pipeline(
     metrics["parity_max_relative"] = parity
     history = [round(m, 4) for m in validation_history(runs / "union.pt")]
     metrics["union_validation"] = {"metric": preset.union.selection, "per_epoch": history}
+    metrics["union_fitted"] = union.fitted()
     total = round(time.perf_counter() - started, 1)
     # An evaluation of finished runs says how long it took, never that training took that long.
     metrics["seconds"] = {"training": round(trained - started, 1), "total": total} if train else {"evaluation": total}

@@ -16,7 +16,9 @@ and how far those pairs are, and returning the change of every log-eigenvalue of
 union; :class:`DeepSetsCorrection` is the cheaper comparison. The union is then, by default
 (:data:`MONOTONE`), a non-negative decrease from the operands' elementwise minimum, so that
 λ(A ∪ B) ≤ min(λ(A), λ(B)) holds for every output, as it does for every true union; :data:`PRIOR`
-is the unbounded corrected prior, kept for the comparison. σ is the spread of the neighbours'
+is the unbounded corrected prior, kept for the comparison. Outside training the network's
+decrease is blended with the neighbours' median one, by a per-pair weight fitted on validation
+data after training (:meth:`UnionOperator.blended`). σ is the spread of the neighbours'
 answers around the prediction plus a term in the predicted decrease, calibrated on validation
 data. It is trained leave-one-body-out, each training pair seeing the priors of pairs cut from
 other bodies, as a new pair would.
@@ -30,6 +32,7 @@ included, scaled by 1/c²). The output is sorted, so it is non-decreasing by con
 
 import math
 from dataclasses import asdict, dataclass
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -44,6 +47,7 @@ SHARPNESS = 20.0  # of the softplus that turns the monotone parametrization's si
 # differs by ~1–2 % (the pose noise floor), two different parts by tens of per cent. Learned.
 GATE_WIDTH = 0.03
 PRIOR, MONOTONE = "prior", "monotone"  # the parametrizations of the union (UnionConfig.parametrization)
+UNFITTED_BLEND = (-math.inf, 0.0, 0.0, 0.0, 0.0)  # UnionOperator.blended's weights before fitting: w = 0
 
 
 @dataclass(frozen=True)
@@ -281,6 +285,25 @@ def _encoder(width: int, heads: int, layers: int, feed_forward: int, dropout: fl
 CORRECTIONS = {"deepsets": DeepSetsCorrection, "transformer": TransformerCorrection}
 
 
+class Proposal(NamedTuple):
+    """A pair as the operator sees it before the blend (``UnionOperator.proposal``): the common
+    scale (B, 1); both operands and their minimum in z (B, k); what each neighbour's parts added
+    (B, n, k) and that taken off this pair's minimum; the neighbours' key distances (B, n); the
+    coincidence gate (B, 1); the corrected prior (B, k) and the network's decrease from the
+    minimum (B, k; None for the PRIOR parametrization)."""
+
+    scale: Tensor
+    za: Tensor
+    zb: Tensor
+    floor: Tensor
+    added: Tensor
+    transferred: Tensor
+    distances: Tensor
+    gate: Tensor
+    proposed: Tensor
+    decrease: Tensor | None
+
+
 def _fixed_floor_of_older_states(module: nn.Module, state: dict, prefix: str, *_: object) -> None:
     """States saved before σ's floor was a weight of its own carry none: theirs was the fixed
     SIGMA_FLOOR, scaled with the spread (σ = (spread + SIGMA_FLOOR)·sigma_scale + …)."""
@@ -305,27 +328,98 @@ class UnionOperator(nn.Module):
         self.register_buffer("sigma_floor", torch.full((), SIGMA_FLOOR))
         self.register_buffer("sigma_decrease", torch.zeros(()))
         self.register_buffer("sigma_disagreement", torch.zeros(()))
+        # The blend of the network's decrease with the neighbours' (:meth:`blended`): fitted on
+        # validation pairs each time a run is loaded (deterministic, seconds), never trained, so
+        # not part of the saved state; unfitted, its weight is 0.
+        self.register_buffer("blend_weights", torch.tensor(UNFITTED_BLEND), persistent=False)
         self.register_load_state_dict_pre_hook(_fixed_floor_of_older_states)
 
     def forward(
         self, a: torch.Tensor, b: torch.Tensor, exclude: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
+        parts = self.proposal(a, b, exclude)
+        if self.config.parametrization == MONOTONE:
+            decrease = parts.decrease
+            if not self.training:
+                decrease = self.blended(decrease, *self.blend_terms(parts))
+            z = parts.floor - decrease
+        else:
+            z, decrease = parts.proposed, torch.zeros_like(parts.proposed)
+        union = torch.sort(torch.relu(torch.exp(z) - EPSILON), dim=-1).values
+        disagreement = (1 - parts.gate) * (parts.za - parts.zb).abs()  # of operands taken for one region
+        return union * parts.scale, self.sigma(union, parts.transferred, decrease, disagreement) * parts.scale
+
+    def proposal(self, a: Tensor, b: Tensor, exclude: Tensor | None = None) -> "Proposal":
+        """What the memory and the correction say about a pair, before the blend (:meth:`blended`)."""
         scale = common_scale(a, b)
         za, zb = relative_log(a, scale), relative_log(b, scale)
         unions, distances, floors = self.memory(a, b, self.config.neighbours, exclude)
         priors = relative_log(unions, 1.0)  # (B, neighbours, k)
         floor = torch.minimum(za, zb)
-        # What each neighbour's parts added to each other, taken off this pair's minimum.
-        transferred = floor[:, None] - (floors - priors)
+        added = floors - priors  # what each neighbour's parts added to each other, in z
+        transferred = floor[:, None] - added  # … taken off this pair's minimum
         change = self.correction(za, zb, torch.cat([priors, transferred], dim=1), distances)
         gate = self.coincidence(za, zb)
-        if self.config.parametrization == MONOTONE:
-            z, decrease = self.decreased(floor, priors[:, 0] + change, gate)
-        else:
-            z, decrease = priors[:, 0] + change, torch.zeros_like(change)
-        union = torch.sort(torch.relu(torch.exp(z) - EPSILON), dim=-1).values
-        disagreement = (1 - gate) * (za - zb).abs()  # of operands taken for one region; 0 when not gated
-        return union * scale, self.sigma(union, transferred, decrease, disagreement) * scale
+        proposed = priors[:, 0] + change
+        decrease = self.decreased(floor, proposed, gate)[1] if self.config.parametrization == MONOTONE else None
+        return Proposal(scale, za, zb, floor, added, transferred, distances, gate, proposed, decrease)
+
+    @staticmethod
+    def blend_terms(parts: "Proposal") -> tuple[Tensor, Tensor]:
+        """The neighbours' median decrease, gated (B, k), and what the blend's weight reads (B, 5):
+        1, the gate, how much the neighbours disagree on what they added (their standard
+        deviation, mean over the spectrum), how far they are (mean key distance), and how much
+        their median says was added (mean over the spectrum). Symmetric in the operands, like
+        everything they are made of."""
+        added = torch.clamp(parts.added, min=0)  # a union is never above its parts' minimum
+        ordered = added.sort(dim=1).values
+        count = added.shape[1]
+        median = (ordered[:, (count - 1) // 2] + ordered[:, count // 2]) / 2
+        features = torch.cat(
+            [
+                torch.ones_like(parts.gate),
+                parts.gate,
+                added.std(dim=1, correction=0).mean(-1, keepdim=True),
+                parts.distances.mean(1, keepdim=True),
+                median.mean(-1, keepdim=True),
+            ],
+            dim=1,
+        )
+        return parts.gate * median, features
+
+    def blended(self, decrease: Tensor, median: Tensor, features: Tensor) -> Tensor:
+        """The network's decrease blended with the neighbours' median decrease (gated), outside
+        training: w = sigmoid(features · ``blend_weights``) per pair, fitted on validation pairs
+        after training (``train_union.fit_blend``).
+
+        Why: the median of what the nearest training pairs' parts added (leave-one-body-out)
+        beats the network where nothing or little is added — a re-scan, a view in another pose,
+        a close-up inside a view — and loses to it where much is added; which of the two to
+        trust is read off the neighbours themselves (their agreement, distance, and median) and
+        the gate. Both decreases are non-negative and zero for one spectrum twice, so the blend
+        keeps the bound, U(A, A) = A, commutativity and scale-equivariance. Unfitted (the
+        default: a bias of −∞), w = 0 exactly: the network alone, as trained.
+        """
+        weight = torch.sigmoid(features @ self.blend_weights)[:, None]
+        return (1 - weight) * decrease + weight * median
+
+    def fitted(self) -> dict[str, float | list[float] | None]:
+        """What was fitted beside the trained weights, for the metrics: the gate's width τ (None
+        without a gate), the blend's weights (features of :meth:`blend_terms`, in order; None
+        unfitted) and σ's four weights."""
+        blend = [round(float(w), 4) for w in self.blend_weights]
+        return {
+            "gate_width": math.exp(self.log_gate_width.item()) if self.gated else None,
+            "blend_weights": blend if all(map(math.isfinite, blend)) else None,
+            "sigma_spread": float(self.sigma_scale),
+            "sigma_floor": float(self.sigma_floor),
+            "sigma_decrease": float(self.sigma_decrease),
+            "sigma_disagreement": float(self.sigma_disagreement),
+        }
+
+    @torch.no_grad()
+    def set_blend_weights(self, weights: np.ndarray | tuple[float, ...]) -> None:
+        self.blend_weights.copy_(torch.as_tensor(np.asarray(weights, dtype=np.float32)))
 
     def coincidence(self, za: Tensor, zb: Tensor) -> Tensor:
         """(B, 1): how far apart the operands are, 0 when their spectra are one, near 1 when

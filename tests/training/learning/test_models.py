@@ -27,14 +27,27 @@ CORRECTIONS = ("deepsets", "transformer")
 PARAMETRIZATIONS = (PRIOR, MONOTONE)
 
 
-def operator(correction: str, seed: int = 0, stored: int = 50, parametrization: str = MONOTONE) -> UnionOperator:
+# The blend of the network's decrease with the neighbours' (UnionOperator.blended): unfitted (w = 0),
+# and weights that give every pair a weight of its own between 0 and 1.
+BLENDS = (None, (0.5, -2.0, 1.0, 0.3, 4.0))
+
+
+def operator(
+    correction: str,
+    seed: int = 0,
+    stored: int = 50,
+    parametrization: str = MONOTONE,
+    blend: tuple[float, ...] | None = None,
+) -> UnionOperator:
     """An operator with random weights (the correction's zero-initialised last layer too) over a
-    random memory."""
+    random memory, its blend set to ``blend`` (unfitted for None)."""
     memory = UnionMemory(spectra(stored, 100 + seed), spectra(stored, 200 + seed), spectra(stored, 300 + seed) / 2)
     torch.manual_seed(seed)
     model = UnionOperator(UnionConfig(correction=correction, parametrization=parametrization), memory)
     last = model.correction.rho if correction == "transformer" else model.correction.head[-1]
     torch.nn.init.normal_(last.weight, std=0.05)
+    if blend is not None:
+        model.set_blend_weights(blend)
     return model.eval()
 
 
@@ -120,11 +133,12 @@ def test_an_untrained_monotone_operator_returns_the_prior_below_the_minimum(corr
     torch.testing.assert_close(predicted, expected, rtol=1e-2, atol=1e-2)
 
 
+@pytest.mark.parametrize("blend", BLENDS)
 @pytest.mark.parametrize("correction", CORRECTIONS)
-def test_a_monotone_union_is_never_above_either_part_whatever_its_weights(correction):
+def test_a_monotone_union_is_never_above_either_part_whatever_its_weights(correction, blend):
     """λᵢ(A ∪ B) ≤ min(λᵢ(A), λᵢ(B)) by construction: random weights, random operands."""
     for seed in range(3):
-        model = operator(correction, seed)
+        model = operator(correction, seed, blend=blend)
         for name, parameter in model.correction.named_parameters():
             if "weight" in name and parameter.dim() > 1:
                 torch.nn.init.normal_(parameter, std=0.5)
@@ -134,14 +148,15 @@ def test_a_monotone_union_is_never_above_either_part_whatever_its_weights(correc
         assert (union <= torch.minimum(a, b) * (1 + 1e-5)).all()
 
 
+@pytest.mark.parametrize("blend", BLENDS)
 @pytest.mark.parametrize("correction", CORRECTIONS)
-def test_a_part_united_with_itself_is_itself_whatever_its_weights(correction):
+def test_a_part_united_with_itself_is_itself_whatever_its_weights(correction, blend):
     """Idempotence by construction: the coincidence gate is exactly 0 for one spectrum twice,
     so U(A, A) = A with random weights and a memory that knows nothing of A; two different
     parts get the full decrease the network proposes, and a pair 1 % apart stays below both."""
     a = spectra(64, 30)
     for seed in range(3):
-        model = operator(correction, seed)
+        model = operator(correction, seed, blend=blend)
         for name, parameter in model.correction.named_parameters():
             if "weight" in name and parameter.dim() > 1:
                 torch.nn.init.normal_(parameter, std=0.5)
@@ -156,10 +171,11 @@ def test_a_part_united_with_itself_is_itself_whatever_its_weights(correction):
         assert (near[0] <= torch.minimum(a, a) * (1 + 1e-5)).all()
 
 
+@pytest.mark.parametrize("blend", BLENDS)
 @pytest.mark.parametrize("parametrization", PARAMETRIZATIONS)
 @pytest.mark.parametrize("correction", CORRECTIONS)
-def test_union_is_exactly_commutative_and_non_decreasing(correction, parametrization):
-    model = operator(correction, parametrization=parametrization)
+def test_union_is_exactly_commutative_and_non_decreasing(correction, parametrization, blend):
+    model = operator(correction, parametrization=parametrization, blend=blend)
     a, b = spectra(64, 1), spectra(64, 2)
     with torch.no_grad():
         ab, sigma_ab = model(a, b)
@@ -168,11 +184,12 @@ def test_union_is_exactly_commutative_and_non_decreasing(correction, parametriza
     assert (torch.diff(ab, dim=1) >= 0).all() and (ab >= 0).all() and (sigma_ab > 0).all()
 
 
+@pytest.mark.parametrize("blend", BLENDS)
 @pytest.mark.parametrize("correction", CORRECTIONS)
 @pytest.mark.parametrize("factor", [0.01, 0.25, 3.0, 1e4])
-def test_union_is_scale_equivariant(factor, correction):
+def test_union_is_scale_equivariant(factor, correction, blend):
     """A body scaled by s has every eigenvalue scaled by 1/s², its unions' included."""
-    model = operator(correction)
+    model = operator(correction, blend=blend)
     a, b = spectra(16, 3), spectra(16, 4)
     with torch.no_grad():
         union, sigma = model(a, b)
@@ -243,6 +260,39 @@ def test_calibration_covers_ninety_percent_and_bins_pairs_by_what_makes_them_unc
     assert (bins[200:][~remeshed[200:]] > TWICE_BIN).all()
     too_few = calibration_bins(model, a.numpy(), b.numpy(), np.linspace(0, 1, 300), remeshed & (np.arange(300) < 30))
     assert not (too_few == REMESHED_BIN).any()
+
+
+@pytest.mark.parametrize("with_chains", [False, True])
+@pytest.mark.parametrize("answer", ["network", "neighbours"])
+def test_the_blend_fitted_on_validation_pairs_finds_which_decrease_their_unions_follow(answer, with_chains):
+    """Validation unions (and chains (A ∪ B) ∪ C) made by the network's decrease alone keep the
+    blend (near) off; made by the neighbours' median decrease, the fitted blend follows it
+    (w → 1): in both cases the fitted operator reproduces them far better than the other answer."""
+    from training.learning.spectral_errors import spectral_errors
+    from training.learning.train_union import fit_blend
+    from training.learning.union_net import UNFITTED_BLEND
+
+    model = operator("deepsets")
+    a, b, c = spectra(400, 50), spectra(400, 51) * 0.5, spectra(400, 52) * 0.7
+    bodies = (np.arange(50) + 1000, np.arange(400))  # no memory row is a validation pair's body
+    answers = {}
+    with torch.no_grad():
+        for name, weights in (("network", UNFITTED_BLEND), ("neighbours", (30.0, 0.0, 0.0, 0.0, 0.0))):
+            model.set_blend_weights(weights)  # w = 0, and w = 1 − 1e-13
+            answers[name] = (model(a, b)[0], model(model(a, b)[0], c)[0])
+    other_name = "neighbours" if answer == "network" else "network"
+    truth, other = ([x.numpy() for x in answers[name]] for name in (answer, other_name))
+    assert np.abs(truth[0] / other[0] - 1).mean() > 0.02  # the two answers differ
+    chains = ((a.numpy(), b.numpy(), c.numpy(), truth[1]), np.arange(400)) if with_chains else None
+    weights = fit_blend(model, a.numpy(), b.numpy(), truth[0], bodies, chains)
+    assert np.allclose(model.blend_weights.numpy(), weights)
+    with torch.no_grad():
+        fitted = (model(a, b)[0].numpy(), model(model(a, b)[0], c)[0].numpy())
+    for step in range(2 if with_chains else 1):
+        error, other_error = (spectral_errors(x[step], truth[step])["mre"] for x in (fitted, other))
+        assert error < 0.1 * other_error
+    if answer == "network":
+        assert weights[0] == UNFITTED_BLEND[0] or spectral_errors(fitted[0], truth[0])["mre"] < 1e-3
 
 
 def test_a_state_saved_before_the_floor_was_a_weight_loads_with_the_fixed_floor_it_had():
