@@ -15,6 +15,7 @@ calibrated.
 
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, fields, replace
+from itertools import product
 from pathlib import Path
 
 import numpy as np
@@ -252,8 +253,11 @@ def fit_blend(
 
 
 DECREASE_WEIGHTS = (0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)  # σ's decrease term, relative to the spread's
-DISAGREEMENT_WEIGHTS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0)  # σ's disagreement term, relative to the spread's
-FLOOR_GRID = (0.01, 0.02, 0.03, 0.05, 0.08)  # σ's floor relative to the spread's, when calibrated (0.01: fixed)
+DISAGREEMENT_WEIGHTS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)  # σ's disagreement term, relative to the spread's
+# σ's term in how far apart the network's and the neighbours' decreases are, relative to the spread's:
+# on the served run it outweighs the spread (256 was kept; a grid up to 16 384 kept it too).
+SPLIT_WEIGHTS = (0.0, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0)
+FLOOR_GRID = (0.01, 0.02, 0.03, 0.05, 0.08)  # σ's floor (a share of the union), when calibrated (0.01: fixed)
 CALIBRATION_BINS = 5
 COINCIDENT = 0.5  # a validation pair whose coincidence gate is below this is taken for one region twice
 IDENTICAL_BIN, REMESHED_BIN, TWICE_BIN = -1, 0, 1  # then the quintiles of the decrease
@@ -301,35 +305,48 @@ def calibrate(
     remeshed: np.ndarray,
     bodies: tuple[np.ndarray, np.ndarray],
     floors: tuple[float, ...] = (SIGMA_FLOOR,),
-) -> tuple[float, float, float, float]:
-    """Fit σ's four weights so that μ ± z·σ holds 90 % of the validation eigenvalues, and as
+) -> tuple[float, ...]:
+    """Fit σ's five weights so that μ ± z·σ holds 90 % of the validation eigenvalues, and as
     evenly as it can across the bins of :func:`calibration_bins`: re-meshed pairs, pairs taken
     for one region scanned twice, pairs that add little and pairs that add much.
 
-    For each relative weight of the floor (of ``floors``), decrease and disagreement terms the
-    common factor is the one that covers 90 % overall; the weights kept are those whose worst
-    coverage over the bins is nearest 90 %. ``remeshed`` flags the pairs whose parts are in
-    another meshing than their union. Returns the (spread, floor, decrease, disagreement) weights.
+    The floor is absolute (a share of the union, of ``floors``): it stands for what meshing
+    alone moves a spectrum by, which validation pairs, in the training meshing, cannot show
+    unless re-meshed ones are among them (then ``floors`` is a grid to choose from). For each
+    floor and each relative weight of the decrease, disagreement and split terms (the spread's
+    being 1), the common factor of those terms is the one that covers 90 % overall; the weights
+    kept are those whose worst coverage over the bins is nearest 90 %. Scaling the floor with
+    the other terms let it shrink with the spread's share once the split term came (to 2 % of
+    its value) and halved the coverage of re-meshed re-scans on the tests. ``remeshed`` flags
+    the pairs whose parts are in another meshing than their union. Returns the (spread, floor,
+    decrease, disagreement, split) weights.
     """
     parts = []
-    for weights in np.eye(4):
+    for weights in np.eye(5):
         model.set_sigma_weights(*weights)
         mean, sigma = predict(model, a, b, bodies)
         parts.append(sigma)
     error = np.abs(mean - union)
     added = parts[2].mean(1) / np.maximum(np.abs(mean).mean(1), 1e-12)
     bins = calibration_bins(model, a, b, added, remeshed)
+    checked = np.unique(bins[bins != IDENTICAL_BIN])
     monotone = model.config.parametrization == MONOTONE
-    best = (np.inf, 1.0, SIGMA_FLOOR, 0.0, 0.0)
-    for floor in floors:
-        for weight in DECREASE_WEIGHTS if monotone else (0.0,):
-            for other in DISAGREEMENT_WEIGHTS if model.gated else (0.0,):
-                sigma = np.maximum(parts[0] + floor * parts[1] + weight * parts[2] + other * parts[3], 1e-12)
-                factor = float(np.quantile(error / sigma, 0.9) / INTERVAL_Z)
-                covered = error <= INTERVAL_Z * factor * sigma
-                worst = max(abs(covered[bins == i].mean() - 0.9) for i in np.unique(bins[bins != IDENTICAL_BIN]))
-                if worst < best[0]:
-                    best = (worst, factor, factor * floor, factor * weight, factor * other)
+    grid = product(
+        floors,
+        DECREASE_WEIGHTS if monotone else (0.0,),
+        DISAGREEMENT_WEIGHTS if model.gated else (0.0,),
+        SPLIT_WEIGHTS if monotone else (0.0,),
+    )
+    best = (np.inf, 1.0, SIGMA_FLOOR, 0.0, 0.0, 0.0)
+    for floor, *relative in grid:
+        terms = np.maximum(parts[0] + sum(w * part for w, part in zip(relative, parts[2:], strict=True)), 1e-12)
+        # The smallest factor that covers each eigenvalue, over the floor's share: its 90 % quantile.
+        needed = np.maximum(error / INTERVAL_Z - floor * parts[1], 0.0) / terms
+        factor = float(np.quantile(needed, 0.9))
+        covered = error <= INTERVAL_Z * (floor * parts[1] + factor * terms)
+        worst = max(abs(covered[bins == i].mean() - 0.9) for i in checked)
+        if worst < best[0]:
+            best = (worst, factor, floor, *(factor * w for w in relative))
     model.set_sigma_weights(*best[1:])
     return best[1:]
 

@@ -248,7 +248,7 @@ def test_calibration_covers_ninety_percent_and_bins_pairs_by_what_makes_them_unc
     remeshed[::10] = True  # ten of the identical pairs, ten re-scans, ten different pairs
     bodies = (np.arange(50) + 1000, np.arange(300))  # no memory row is a calibration pair's body
     weights = calibrate(model, a.numpy(), b.numpy(), truth, remeshed, bodies, FLOOR_GRID)
-    assert len(weights) == 4 and all(w >= 0 for w in weights) and weights[0] > 0 and weights[1] > 0
+    assert len(weights) == 5 and all(w >= 0 for w in weights) and weights[0] > 0 and weights[1] > 0
     with torch.no_grad():
         mean, sigma = model(a, b)
     covered = np.abs(mean.numpy() - truth) <= 1.6449 * sigma.numpy()
@@ -296,15 +296,32 @@ def test_the_blend_fitted_on_validation_pairs_finds_which_decrease_their_unions_
 
 
 def test_a_state_saved_before_the_floor_was_a_weight_loads_with_the_fixed_floor_it_had():
-    """Older checkpoints have no ``sigma_floor``: theirs was SIGMA_FLOOR scaled with the spread."""
+    """Older checkpoints have no ``sigma_floor`` (theirs was SIGMA_FLOOR scaled with the spread)
+    and no ``sigma_split`` (theirs was 0)."""
     from training.learning.union_net import SIGMA_FLOOR
 
     saved = operator("deepsets").state_dict()
     saved["sigma_scale"] = torch.tensor(0.9)
-    del saved["sigma_floor"]
+    del saved["sigma_floor"], saved["sigma_split"]
     model = operator("deepsets")
+    model.sigma_split.fill_(3.0)
     model.load_state_dict(saved)  # strict: nothing missing
     assert float(model.sigma_floor) == pytest.approx(0.9 * SIGMA_FLOOR)
+    assert float(model.sigma_split) == 0.0  # the term came later: such states had none
+
+
+@pytest.mark.parametrize("correction", CORRECTIONS)
+def test_sigma_of_the_two_answers_split_vanishes_for_one_spectrum_twice_and_not_for_two_parts(correction):
+    """σ's split term (the network's decrease against the neighbours' median) is exactly 0 for
+    one spectrum twice, where both say nothing is added, and positive for different parts."""
+    model = operator(correction, blend=BLENDS[1])
+    model.set_sigma_weights(0.0, 0.0, 0.0, 0.0, 1.0)
+    a, b = spectra(32, 60), spectra(32, 61) * 0.6
+    with torch.no_grad():
+        same = model(a, a)[1]
+        apart = model(a, b)[1]
+    assert torch.equal(same, torch.zeros_like(same))
+    assert (apart.sum(1) > 0).all()
 
 
 def test_the_inference_form_of_the_transformer_computes_what_training_does():
