@@ -149,10 +149,11 @@ class UnionMemory(nn.Module):
         backward = torch.cat([forward[:, k:], forward[:, :k]], dim=1)
         # Squared distances from the keys' mean, the nearer operand order: float32 shortlists
         # (each order's own query norm counts here: from the mean, the two orders' differ).
+        # Both orders in one product: the keys (4.5 MB) are read once, not once per order.
         centred_keys = (self.keys - self.centre).T
-        centred = [(q - self.centre.double()).float() for q in (forward, backward)]
-        near = [(q**2).sum(1, keepdim=True) + self.centred_norms - 2 * q @ centred_keys for q in centred]
-        coarse = torch.minimum(*near)
+        centred = (torch.cat([forward, backward]) - self.centre.double()).float()
+        near = (centred**2).sum(1, keepdim=True) + self.centred_norms - 2 * centred @ centred_keys
+        coarse = torch.minimum(*near.unflatten(0, (2, -1)))
         if exclude is not None:
             coarse = coarse.masked_fill(exclude, torch.inf)
         candidates = torch.topk(coarse, min(count + SHORTLIST, len(self.keys)), dim=1, largest=False)[1]
