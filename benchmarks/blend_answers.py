@@ -22,7 +22,7 @@ import torch
 from training.data.spectra import MESH, REMESHED
 from training.learning.data import SpectralData
 from training.learning.spectral_errors import spectral_errors
-from training.learning.train_union import load_operator, memory_rows, predict
+from training.learning.train_union import load_operator, memory_rows, predict, same_body
 from training.learning.union_net import UNFITTED_BLEND, UnionOperator
 
 NEIGHBOURS_ALONE = (30.0, 0.0, 0.0, 0.0, 0.0)  # weight 1 − 1e-13 for every pair
@@ -31,7 +31,7 @@ NEIGHBOURS_ALONE = (30.0, 0.0, 0.0, 0.0, 0.0)  # weight 1 − 1e-13 for every pa
 @torch.no_grad()
 def blend_weight(model: UnionOperator, a: np.ndarray, b: np.ndarray, bodies) -> float:
     """The fitted blend's mean weight over these pairs."""
-    hidden = None if bodies is None else torch.as_tensor(bodies[0])[None, :] == torch.as_tensor(bodies[1])[:, None]
+    hidden = None if bodies is None else same_body(torch.as_tensor(bodies[0]), torch.as_tensor(bodies[1]))
     parts = model.proposal(torch.as_tensor(a), torch.as_tensor(b), hidden)
     _, features = model.blend_terms(parts)
     return float(torch.sigmoid(features @ model.blend_weights).mean())

@@ -8,9 +8,9 @@ the other views of its scanning session are all cut from its body, and their uni
 union or nearly, which no pair of a new body has in the memory. Every step also sees a smaller
 batch of chains whose inner union is the operator's *own prediction*, so errors are trained not
 to grow along a chain. Inputs get a small multiplicative jitter (the spectrum of a fixed region
-moves ~1 % across poses). The best epoch by a validation metric (``selection``) is kept; then, on the validation rows,
-the blend of the network's decrease with the neighbours' is fitted (:func:`fit_blend`) and σ
-calibrated.
+moves ~1 % across poses). The best epoch by a validation metric (``selection``) is kept; then,
+on the validation rows, the blend of the network's decrease with the neighbours' is fitted
+(:func:`fit_blend`) and σ calibrated.
 """
 
 from collections.abc import Iterator
@@ -197,6 +197,15 @@ def training_chains(data: SpectralData) -> tuple[tuple[np.ndarray, ...], np.ndar
     rows = ~data.triples.test
     a, b, c, _, abc = (s[rows] for s in data.triples.spectra)
     return (a, b, c, abc), data.triples.shape[rows]
+
+
+def fit_blend_on(model: UnionOperator, data: SpectralData) -> np.ndarray:
+    """:func:`fit_blend` on what a run of ``data`` fits it to: its validation pairs and its training
+    chains, leave-one-body-out against the memory's rows."""
+    pairs = data.pairs
+    validation = pairs.rows(np.flatnonzero(pairs.split == "validation"))
+    bodies = (pairs.shape_a[memory_rows(data)], validation.shape_a)
+    return fit_blend(model, validation.a, validation.b, validation.union, bodies, training_chains(data))
 
 
 def _searched(rows: BlendRows, start: np.ndarray) -> np.ndarray:
@@ -393,7 +402,7 @@ def train_union(
 
     objective = Objective("union", len(train), batch_loss, validation_metric, lambda metric: f"{metric:.4g}")
     fit(model, objective, settings, checkpoint, run_config, generator)
-    fit_blend(model, validation.a, validation.b, validation.union, bodies, training_chains(data))
+    fit_blend_on(model, data)
     remeshed = validation.variant == REMESHED
     calibrate(model, validation.a, validation.b, validation.union, remeshed, bodies, settings.sigma_floors)
     model.cpu().eval()
@@ -405,11 +414,7 @@ def load_operator(data: SpectralData, checkpoint: Path) -> UnionOperator:
     (σ uncalibrated): e.g. to predict pairs leave-one-body-out (:func:`predict` with ``bodies``)
     for another model."""
     state = torch.load(checkpoint, map_location="cpu", weights_only=False)
-    pairs = data.pairs
-    train = pairs.rows(memory_rows(data))
-    model = build_operator(train, UnionConfig(**state["config"]["model"]))
+    model = build_operator(data.pairs.rows(memory_rows(data)), UnionConfig(**state["config"]["model"]))
     model.load_state_dict(state["best_weights"])
-    validation = pairs.rows(np.flatnonzero(pairs.split == "validation"))
-    bodies = (train.shape_a, validation.shape_a)
-    fit_blend(model, validation.a, validation.b, validation.union, bodies, training_chains(data))
+    fit_blend_on(model, data)
     return model.eval()

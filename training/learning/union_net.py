@@ -368,7 +368,7 @@ class UnionOperator(nn.Module):
         change = self.correction(za, zb, torch.cat([priors, transferred], dim=1), distances)
         gate = self.coincidence(za, zb)
         proposed = priors[:, 0] + change
-        decrease = self.decreased(floor, proposed, gate)[1] if self.config.parametrization == MONOTONE else None
+        decrease = self.decreased(floor, proposed, gate) if self.config.parametrization == MONOTONE else None
         return Proposal(scale, za, zb, floor, added, transferred, distances, gate, proposed, decrease)
 
     @staticmethod
@@ -449,8 +449,8 @@ class UnionOperator(nn.Module):
         return 1 - torch.exp(-msd * torch.exp(-2 * self.log_gate_width))
 
     @staticmethod
-    def decreased(floor: Tensor, proposal: Tensor, gate: Tensor) -> tuple[Tensor, Tensor]:
-        """z of the union as a non-negative decrease from the operands' elementwise minimum.
+    def decreased(floor: Tensor, proposal: Tensor, gate: Tensor) -> Tensor:
+        """The union's non-negative decrease in z from the operands' elementwise minimum.
 
         A Dirichlet eigenvalue only falls as the domain grows, so λ(A ∪ B) ≤ min(λ(A), λ(B)),
         with equality when nothing is added (A ∪ A, or A inside B). The decrease is a smooth
@@ -458,10 +458,9 @@ class UnionOperator(nn.Module):
         coincidence ``gate`` (:meth:`coincidence`): "nothing added" is its natural zero, reached
         by a strongly negative signal or by operands that coincide, and the bound holds for every
         output by construction (sorting keeps it: the i-th smallest of values each below a sorted
-        bound is below the bound's i-th). Returns (z, decrease).
+        bound is below the bound's i-th). The union's z is ``floor`` minus it.
         """
-        decrease = gate * nn.functional.softplus(SHARPNESS * (floor - proposal)) / SHARPNESS
-        return floor - decrease, decrease
+        return gate * nn.functional.softplus(SHARPNESS * (floor - proposal)) / SHARPNESS
 
     @torch.no_grad()
     def set_sigma_weights(
