@@ -2,6 +2,8 @@
 
 - ``elementwise_min``: domain monotonicity says λᵢ(A ∪ B) ≤ min(λᵢ(A), λᵢ(B)); the minimum is the
   tightest bound that needs no learning.
+- ``disjoint_union``: the k smallest of both spectra together, the exact union of two parts that
+  share nothing (the far end of the overlap range, where the minimum is the near end).
 - ``larger_part``: the spectrum of the part with the larger area (what you get by ignoring the
   smaller scan).
 - :class:`UnionLookup`: the nearest training pair, matched on log-eigenvalues with the mean
@@ -16,6 +18,10 @@ TINY = 1e-9
 
 def elementwise_min(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.minimum(a, b)
+
+
+def disjoint_union(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.sort(np.concatenate([a, b], axis=1), axis=1)[:, : a.shape[1]]
 
 
 def larger_part(a: np.ndarray, b: np.ndarray, area_a: np.ndarray, area_b: np.ndarray) -> np.ndarray:

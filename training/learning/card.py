@@ -17,7 +17,7 @@ PAPER_ROWS = [
     for variant in ("mesh", "remeshed")
     for group in ("known_man", "unknown_man", "unknown_woman")
 ]
-BASELINES = ("elementwise_min", "larger_part", "lookup")
+BASELINES = ("elementwise_min", "disjoint_union", "larger_part", "lookup")
 
 
 def percent(x: float) -> str:

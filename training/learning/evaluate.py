@@ -17,7 +17,7 @@ from app.inference.models import chained_sigma
 from training.data.overlaps import CAMERA
 from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION
 from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
-from training.learning.baselines import UnionLookup, elementwise_min, larger_part
+from training.learning.baselines import UnionLookup, disjoint_union, elementwise_min, larger_part
 from training.learning.data import PairTable, SpectralData
 from training.learning.localizer_net import Localizer
 from training.learning.masks import PARTS_UNITED, SERVED_LOCALIZER, symmetric_scores, united_by_mirror_rule
@@ -133,6 +133,7 @@ class Evaluator:
         methods = {
             "operator": mean,
             "elementwise_min": elementwise_min(rows.a, rows.b),
+            "disjoint_union": disjoint_union(rows.a, rows.b),
             "larger_part": larger_part(
                 rows.a, rows.b, self.data.mask_area(rows.mask_a), self.data.mask_area(rows.mask_b)
             ),
@@ -197,7 +198,7 @@ class Evaluator:
         if not len(chains.shape):
             return out
         views = chains.views
-        current = {"operator": views[:, 0], "lookup": views[:, 0]}
+        current = {"operator": views[:, 0], "lookup": views[:, 0], "disjoint_union": views[:, 0]}
         sigma = np.zeros_like(views[:, 0])
         for length in range(2, views.shape[1] + 1):
             step = views[:, length - 1]
@@ -205,6 +206,7 @@ class Evaluator:
             sigma = chained_sigma(current["operator"], sigma, union, step_sigma)
             current["operator"] = union
             current["lookup"] = self.lookup.predict(current["lookup"], step)
+            current["disjoint_union"] = disjoint_union(current["disjoint_union"], step)
             if length < 3:
                 continue
             truth = chains.unions[:, length - 2]
@@ -231,6 +233,7 @@ class Evaluator:
         chained = {
             "operator": outer,
             "elementwise_min": np.minimum(np.minimum(a, b), c),
+            "disjoint_union": disjoint_union(disjoint_union(a, b), c),
             "lookup": self.lookup.predict(self.lookup.predict(a, b), c),
         }
         sigma = chained_sigma(inner, inner_sigma, outer, outer_sigma)

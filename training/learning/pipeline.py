@@ -63,6 +63,23 @@ TRAINING_PRESETS = {
         UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0, loss="squared"),
         LocalizerTraining(epochs=8, batch=128, first_restart=8),
     ),
+    # The correction reading the operands' disjoint union too (UnionConfig.disjoint_prior).
+    "standard-disjoint": TrainingPreset(
+        UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0),
+        LocalizerTraining(epochs=8, batch=128, first_restart=8),
+        UnionConfig(disjoint_prior=True),
+    ),
+    # Half the training rows' memory also hides the pairs of their union's type (train_union.union_kin),
+    # with and without the disjoint union read.
+    "standard-unseen-types": TrainingPreset(
+        UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0, hide_union_type=0.5),
+        LocalizerTraining(epochs=8, batch=128, first_restart=8),
+        UnionConfig(disjoint_prior=True),
+    ),
+    "standard-unseen-types-plain": TrainingPreset(
+        UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0, hide_union_type=0.5),
+        LocalizerTraining(epochs=8, batch=128, first_restart=8),
+    ),
     # The comparison of parametrizations: the corrected prior as before, no bound by construction.
     "standard-prior": TrainingPreset(
         UnionTraining(epochs=16, batch=64, learning_rate=1e-3, first_restart=16, dropout=0.0),

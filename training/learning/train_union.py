@@ -20,11 +20,14 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from scipy import sparse
 from scipy.optimize import minimize
 from scipy.special import expit
 
 from app.contract import INTERVAL_Z
+from training.data.pairs import FULL_COVERAGE
 from training.data.spectra import REMESHED
+from training.data.splits import TEST_B_MAX_IOU
 from training.learning.data import PairTable, SpectralData
 from training.learning.fit import LoopSettings, Objective, fit, pick_device, seed_everything
 from training.learning.spectral_errors import spectral_errors
@@ -52,6 +55,9 @@ class UnionTraining(LoopSettings):
     # models keep the fixed 0.01; a grid lets validation re-meshed rows (if any) set it.
     sigma_floors: tuple[float, ...] = (SIGMA_FLOOR,)
     selection: str = "mae"  # the validation metric that picks the epoch kept: a key of spectral_errors
+    # The share of training rows whose memory also hides the pairs whose union is of their union's
+    # type (:func:`union_kin`): pairs as Test B's are, whose union no training pair shares.
+    hide_union_type: float = 0.0
 
 
 def _tensor(array: np.ndarray, device: torch.device) -> torch.Tensor:
@@ -71,6 +77,50 @@ def memory_rows(data: SpectralData) -> np.ndarray:
 def same_body(memory_bodies: torch.Tensor, bodies: torch.Tensor) -> torch.Tensor:
     """(B, rows) which memory rows are cut from each query's body (shape A's index)."""
     return memory_bodies[None, :] == bodies[:, None]
+
+
+# union_kin: template vertices sampled (fixed seed) to compare union regions by; queries per product.
+KIN_VERTICES = 2048
+KIN_CHUNK = 1024
+
+
+def union_kin(data: SpectralData, queries: np.ndarray, memory: np.ndarray) -> sparse.csr_matrix:
+    """(len(queries), len(memory)) boolean: which ``memory`` rows have a union of the same type
+    as each query row's, i.e. a symmetric area IoU (as it is or mirrored) of at least
+    ``TEST_B_MAX_IOU`` on a fixed sample of template vertices (a row is its own kin).
+    Full-coverage pairs (their union is the whole body, a type every body has) have no kin.
+
+    Why: leave-one-body-out training still shows every pair the unions of its own type cut from
+    other bodies, so the network learns to trust its nearest neighbours; Test B's unions are,
+    by construction, unlike every training union (IoU below the same threshold), and there it
+    was worse than the plain disjoint union. Hiding a row's kin from its memory in training is
+    Test B's situation, made from training rows alone.
+    """
+    pairs = data.pairs
+    partial = [np.flatnonzero(pairs.scenario[rows] != FULL_COVERAGE) for rows in (queries, memory)]
+    masks = [pairs.mask_union[rows[kept]] for rows, kept in zip((queries, memory), partial, strict=True)]
+    unique, inverse = np.unique(np.concatenate(masks), return_inverse=True)
+    template = data.template
+    count = len(template.vertices)
+    sample = np.sort(np.random.default_rng([0, 11]).choice(count, min(count, KIN_VERTICES), replace=False))
+    full = data.masks(unique)
+    regions, mirrored = full[:, sample].astype(np.float32), full[:, template.mirror[sample]].astype(np.float32)
+    weights = data.vertex_area[sample].astype(np.float32)
+    areas = regions @ weights
+    linked = []
+    for start in range(0, len(unique), KIN_CHUNK):
+        query, query_areas = regions[start : start + KIN_CHUNK] * weights, areas[start : start + KIN_CHUNK, None]
+        best = np.zeros((len(query), len(unique)), dtype=np.float32)
+        for other in (regions, mirrored):
+            shared = query @ other.T
+            best = np.maximum(best, shared / np.maximum(query_areas + areas - shared, 1e-12))
+        linked.append(sparse.csr_matrix(best >= TEST_B_MAX_IOU))
+    kin_types = sparse.vstack(linked).tocsr()
+    members = [
+        sparse.csr_matrix((np.ones(len(kept), dtype=bool), (kept, types)), shape=(len(rows), len(unique)))
+        for rows, kept, types in zip((queries, memory), partial, np.split(inverse, [len(partial[0])]), strict=True)
+    ]
+    return (members[0] @ kin_types @ members[1].T).astype(bool).tocsr()
 
 
 # The error of the relative logs z = log(λ / s + ε) per eigenvalue, made a loss. Either is close
@@ -386,6 +436,7 @@ def train_union(
     bodies = (train.shape_a, validation.shape_a)
     chain_rows = np.flatnonzero(~data.triples.test)
     chain_tensors = [_tensor(s[chain_rows], device) for s in data.triples.spectra]
+    kin = union_kin(data, memory_rows(data), memory_rows(data)) if settings.hide_union_type > 0 else None
 
     def batch_loss(rows: torch.Tensor) -> torch.Tensor:
         a, b = (_jitter(t[rows], settings.jitter, generator) for t in train_tensors[:2])
@@ -394,7 +445,12 @@ def train_union(
         if len(chain_rows):
             pick = torch.randint(len(chain_rows), (settings.chain_batch,), generator=generator).to(device)
             chains = tuple(t[pick] for t in chain_tensors)
-        return _losses(model, batch, same_body(memory_bodies, memory_bodies[rows]), chains, settings.loss)
+        hidden = same_body(memory_bodies, memory_bodies[rows])
+        if kin is not None:
+            chosen = torch.rand(len(rows), generator=generator) < settings.hide_union_type
+            of_kind = torch.as_tensor(kin[rows.cpu().numpy()].toarray(), device=device)
+            hidden = hidden | (of_kind & chosen.to(device)[:, None])
+        return _losses(model, batch, hidden, chains, settings.loss)
 
     def validation_metric() -> float:
         predicted = predict(model, validation.a, validation.b, bodies)[0]

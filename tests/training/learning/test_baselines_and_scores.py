@@ -3,8 +3,12 @@
 import numpy as np
 import pytest
 
+from app.geometry.laplacian import mesh_operators
+from app.geometry.spectrum import eigenvalues
+from app.geometry.topology import boundary_vertex_mask
 from app.inference.template import PART_NAMES
-from training.learning.baselines import UnionLookup, elementwise_min, larger_part
+from tests.conftest import grid
+from training.learning.baselines import UnionLookup, disjoint_union, elementwise_min, larger_part
 from training.learning.card import per_eigenvalue_table
 from training.learning.masks import symmetric_scores, united_by_mirror_rule
 
@@ -36,6 +40,25 @@ def test_min_and_larger_part():
     b = np.array([[2.0, 4.0], [1.0, 9.0]])
     np.testing.assert_array_equal(elementwise_min(a, b), [[1, 4], [1, 3]])
     np.testing.assert_array_equal(larger_part(a, b, np.array([1.0, 0.2]), np.array([0.5, 0.7])), [[1, 5], [1, 9]])
+
+
+def _dirichlet_spectrum(vertices: np.ndarray, faces: np.ndarray, k: int) -> np.ndarray:
+    return eigenvalues(mesh_operators(vertices, faces), k, boundary_vertex_mask(faces, len(vertices)))
+
+
+def test_disjoint_union_is_the_spectrum_of_two_parts_that_share_nothing():
+    """The engine's Dirichlet spectrum of one mesh holding two separate patches (a square and a
+    longer rectangle, side by side) is the baseline's merge of the patches' own spectra."""
+    square, strip = grid(np.pi, np.pi, 24, 24), grid(2 * np.pi, np.pi, 40, 20)
+    apart = strip.vertices + [4.0, 0.0, 0.0]
+    faces = np.concatenate([square.faces, strip.faces + len(square.vertices)])
+    both = (np.concatenate([square.vertices, apart]), faces)
+    k = 12
+    parts = [_dirichlet_spectrum(m.vertices, m.faces, k)[None] for m in (square, strip)]
+    merged = disjoint_union(*parts)[0]
+    np.testing.assert_allclose(_dirichlet_spectrum(*both, k), merged, rtol=1e-8)
+    assert (merged <= elementwise_min(*parts)[0]).all() and (merged < elementwise_min(*parts)[0]).any()
+    np.testing.assert_array_equal(disjoint_union(*parts), disjoint_union(*parts[::-1]))
 
 
 def test_symmetric_scores_hand_checked():

@@ -20,7 +20,7 @@ from training.data.presets import PRESETS  # noqa: E402
 from training.learning.data import SpectralData  # noqa: E402
 from training.learning.export import session  # noqa: E402
 from training.learning.pipeline import TRAINING_PRESETS, run_pipeline  # noqa: E402
-from training.learning.train_union import train_union  # noqa: E402
+from training.learning.train_union import train_union, union_kin  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -29,6 +29,25 @@ def trained(tmp_path_factory):
     build_dataset(SyntheticSource(), PRESETS["tiny"], root / "data", seed=0, workers=1)
     metrics = run_pipeline(root / "data", root / "runs", root / "models", TRAINING_PRESETS["tiny"], 0, "test")
     return root, metrics
+
+
+def test_union_kin_are_the_pairs_whose_unions_overlap_by_test_b_s_threshold(trained):
+    """Against the exact area IoU of the template masks (as they are or mirrored), away from the
+    threshold (kin are judged on a sample of the vertices); whole-body unions have none."""
+    root, _ = trained
+    data = SpectralData(root / "data")
+    rows = np.flatnonzero(data.pairs.split == "train")
+    kin = union_kin(data, rows, rows).toarray()
+    full = data.pairs.scenario[rows] == "full"
+    assert not kin[full].any() and not kin[:, full].any() and kin[~full][:, ~full].diagonal().all()
+    masks = data.masks(data.pairs.mask_union[rows[~full]]).astype(float)
+    weights, mirror = data.vertex_area, data.template.mirror
+    shared = np.maximum((masks * weights) @ masks.T, (masks * weights) @ masks[:, mirror].T)
+    areas = masks @ weights
+    iou = shared / (areas[:, None] + areas[None, :] - shared)
+    clear = np.abs(iou - 0.8) > 0.05
+    assert 0 < kin[~full][:, ~full][clear].sum() < clear.sum()
+    np.testing.assert_array_equal(kin[~full][:, ~full][clear], iou[clear] >= 0.8)
 
 
 def test_onnx_matches_pytorch(trained):
@@ -75,7 +94,7 @@ def test_tables_cover_the_test_rows(trained):
     assert written["rows"].keys() == metrics["rows"].keys()
     assert any(key.startswith("test_a/") for key in written["rows"])
     row = next(iter(written["rows"].values()))
-    assert {"operator", "elementwise_min", "larger_part", "lookup"} <= set(row["union"])
+    assert {"operator", "elementwise_min", "disjoint_union", "larger_part", "lookup"} <= set(row["union"])
     card = (root / "models" / "MODEL_CARD.md").read_text()
     assert "| test_a/known_man/mesh |" in card and "| λ20 |" in card
     assert any(key.startswith("test_c/") for key in written["strata"]) and "| camera_same |" in card
