@@ -17,10 +17,11 @@ pytest.importorskip("onnxscript")
 from tests.training.data.synthetic import SyntheticSource  # noqa: E402
 from training.data.build import build_dataset  # noqa: E402
 from training.data.presets import PRESETS  # noqa: E402
+from training.learning import train_union as union_training  # noqa: E402
 from training.learning.data import SpectralData  # noqa: E402
 from training.learning.export import session  # noqa: E402
 from training.learning.pipeline import TRAINING_PRESETS, run_pipeline  # noqa: E402
-from training.learning.train_union import train_union, union_kin  # noqa: E402
+from training.learning.train_union import memory_rows, train_union, union_kin  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -48,6 +49,31 @@ def test_union_kin_are_the_pairs_whose_unions_overlap_by_test_b_s_threshold(trai
     clear = np.abs(iou - 0.8) > 0.05
     assert 0 < kin[~full][:, ~full][clear].sum() < clear.sum()
     np.testing.assert_array_equal(kin[~full][:, ~full][clear], iou[clear] >= 0.8)
+
+
+def test_training_hides_each_row_s_union_kin_from_its_memory(trained, tmp_path, monkeypatch):
+    """With every row chosen (a share of 1), what a training row's memory hides is exactly its
+    own body's rows and its union's kin: each batch row's hidden set is one of those."""
+    root, _ = trained
+    data = SpectralData(root / "data")
+    rows = memory_rows(data)
+    bodies = data.pairs.shape_a[rows]
+    expected = (bodies[:, None] == bodies[None, :]) | union_kin(data, rows, rows).toarray()
+    seen = []
+    losses = union_training._losses
+
+    def spy(model, pairs, hidden, chains, loss):
+        seen.append(hidden.cpu().numpy())
+        return losses(model, pairs, hidden, chains, loss)
+
+    monkeypatch.setattr(union_training, "_losses", spy)
+    settings = replace(TRAINING_PRESETS["tiny"].union, epochs=1, hide_union_type=1.0)
+    train_union(data, tmp_path / "union.pt", settings)
+    hidden = np.concatenate(seen)
+    assert len(hidden) >= len(rows) - settings.batch  # an epoch's whole batches
+    assert all((expected == row).all(axis=1).any() for row in hidden)
+    same_body_only = bodies[:, None] == bodies[None, :]
+    assert any(not (same_body_only == row).all(axis=1).any() for row in hidden)  # kin beyond the body
 
 
 def test_onnx_matches_pytorch(trained):
