@@ -76,6 +76,12 @@ TRAINING_PRESETS = {
         LocalizerTraining(epochs=8, batch=128, first_restart=8),
         UnionConfig(disjoint_prior=True),
     ),
+    # The disjoint prior, and the partial unions drawn evenly over their size (train_union.size_weights).
+    "standard-balanced-sizes": TrainingPreset(
+        UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0, balance_union_sizes=True),
+        LocalizerTraining(epochs=8, batch=128, first_restart=8),
+        UnionConfig(disjoint_prior=True),
+    ),
     "standard-unseen-types-plain": TrainingPreset(
         UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0, hide_union_type=0.5),
         LocalizerTraining(epochs=8, batch=128, first_restart=8),

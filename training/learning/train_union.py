@@ -58,6 +58,9 @@ class UnionTraining(LoopSettings):
     # The share of training rows whose memory also hides the pairs whose union is of their union's
     # type (:func:`union_kin`): pairs as Test B's are, whose union no training pair shares.
     hide_union_type: float = 0.0
+    # Draw the training rows whose union falls short of the body evenly over SIZE_BINS bins of the
+    # union's share of the body (the whole-body rows keep their share of the batches): see size_weights.
+    balance_union_sizes: bool = False
 
 
 def _tensor(array: np.ndarray, device: torch.device) -> torch.Tensor:
@@ -121,6 +124,29 @@ def union_kin(data: SpectralData, queries: np.ndarray, memory: np.ndarray) -> sp
         for rows, kept, types in zip((queries, memory), partial, np.split(inverse, [len(partial[0])]), strict=True)
     ]
     return (members[0] @ kin_types @ members[1].T).astype(bool).tocsr()
+
+
+SIZE_BINS = 10  # bins of the union's share of the body over which size_weights draws evenly
+
+
+def size_weights(data: SpectralData, rows: np.ndarray) -> np.ndarray:
+    """(len(rows),) sampling weights summing to 1: the whole-body rows keep their share, the
+    others share the rest evenly among ``SIZE_BINS`` bins of their union's share of the body
+    (uniform in each bin).
+
+    Why: the random draws make most partial unions large (median 84 % of the body) and leave
+    mid-sized ones split along a thin band, where two parts add nearly all of each other, to
+    ~4 % of the rows (`benchmarks/union_sizes.py`); scans come in every size.
+    """
+    pairs = data.pairs
+    share = data.mask_area(pairs.mask_union[rows]) / data.vertex_area.sum()
+    whole = pairs.scenario[rows] == FULL_COVERAGE
+    bins = np.minimum((share * SIZE_BINS).astype(int), SIZE_BINS - 1)
+    counts = np.bincount(bins[~whole], minlength=SIZE_BINS)
+    weights = np.where(whole, 1.0 / max(whole.sum(), 1), 0.0) * whole.mean()
+    partial = (~whole).mean() / np.count_nonzero(counts)
+    weights[~whole] = partial / counts[bins[~whole]]
+    return weights / weights.sum()
 
 
 # The error of the relative logs z = log(λ / s + ε) per eigenvalue, made a loss. Either is close
@@ -438,7 +464,11 @@ def train_union(
     chain_tensors = [_tensor(s[chain_rows], device) for s in data.triples.spectra]
     kin = union_kin(data, memory_rows(data), memory_rows(data)) if settings.hide_union_type > 0 else None
 
+    drawn = torch.as_tensor(size_weights(data, memory_rows(data))) if settings.balance_union_sizes else None
+
     def batch_loss(rows: torch.Tensor) -> torch.Tensor:
+        if drawn is not None:  # the loop's rows replaced by as many drawn by union size
+            rows = torch.multinomial(drawn, len(rows), replacement=True, generator=generator).to(device)
         a, b = (_jitter(t[rows], settings.jitter, generator) for t in train_tensors[:2])
         batch = (a, b, train_tensors[2][rows])
         chains = None

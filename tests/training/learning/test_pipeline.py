@@ -21,7 +21,7 @@ from training.learning import train_union as union_training  # noqa: E402
 from training.learning.data import SpectralData  # noqa: E402
 from training.learning.export import session  # noqa: E402
 from training.learning.pipeline import TRAINING_PRESETS, run_pipeline  # noqa: E402
-from training.learning.train_union import memory_rows, train_union, union_kin  # noqa: E402
+from training.learning.train_union import SIZE_BINS, memory_rows, size_weights, train_union, union_kin  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -49,6 +49,20 @@ def test_union_kin_are_the_pairs_whose_unions_overlap_by_test_b_s_threshold(trai
     clear = np.abs(iou - 0.8) > 0.05
     assert 0 < kin[~full][:, ~full][clear].sum() < clear.sum()
     np.testing.assert_array_equal(kin[~full][:, ~full][clear], iou[clear] >= 0.8)
+
+
+def test_size_weights_keep_the_whole_body_share_and_draw_every_size_bin_alike(trained):
+    root, _ = trained
+    data = SpectralData(root / "data")
+    rows = memory_rows(data)
+    weights = size_weights(data, rows)
+    whole = data.pairs.scenario[rows] == "full"
+    share = data.mask_area(data.pairs.mask_union[rows]) / data.vertex_area.sum()
+    bins = np.minimum((share * SIZE_BINS).astype(int), SIZE_BINS - 1)[~whole]
+    per_bin = np.bincount(bins, weights=weights[~whole], minlength=SIZE_BINS)
+    assert weights.sum() == pytest.approx(1.0) and weights[whole].sum() == pytest.approx(whole.mean())
+    assert len(np.unique(bins)) >= 3
+    np.testing.assert_allclose(per_bin[np.unique(bins)], (~whole).mean() / len(np.unique(bins)))
 
 
 def test_training_hides_each_row_s_union_kin_from_its_memory(trained, tmp_path, monkeypatch):
