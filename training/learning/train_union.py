@@ -143,9 +143,8 @@ def size_weights(data: SpectralData, rows: np.ndarray) -> np.ndarray:
     whole = pairs.scenario[rows] == FULL_COVERAGE
     bins = np.minimum((share * SIZE_BINS).astype(int), SIZE_BINS - 1)
     counts = np.bincount(bins[~whole], minlength=SIZE_BINS)
-    weights = np.where(whole, 1.0 / max(whole.sum(), 1), 0.0) * whole.mean()
-    partial = (~whole).mean() / np.count_nonzero(counts)
-    weights[~whole] = partial / counts[bins[~whole]]
+    weights = np.full(len(rows), 1.0 / len(rows))  # a whole-body row: its share as drawn uniformly
+    weights[~whole] = (~whole).mean() / np.count_nonzero(counts) / counts[bins[~whole]]
     return weights / weights.sum()
 
 
@@ -453,7 +452,8 @@ def train_union(
     device = pick_device()
     config = replace(config, k=data.spectra.shape[1], dropout=settings.dropout)
     pairs = data.pairs
-    train = pairs.rows(memory_rows(data))
+    memory = memory_rows(data)
+    train = pairs.rows(memory)
     validation = pairs.rows(np.flatnonzero(pairs.split == "validation"))
     model = build_operator(train, config).to(device)
     run_config = {"model": config.as_dict(), "training": asdict(settings)}
@@ -462,9 +462,8 @@ def train_union(
     bodies = (train.shape_a, validation.shape_a)
     chain_rows = np.flatnonzero(~data.triples.test)
     chain_tensors = [_tensor(s[chain_rows], device) for s in data.triples.spectra]
-    kin = union_kin(data, memory_rows(data), memory_rows(data)) if settings.hide_union_type > 0 else None
-
-    drawn = torch.as_tensor(size_weights(data, memory_rows(data))) if settings.balance_union_sizes else None
+    kin = union_kin(data, memory, memory) if settings.hide_union_type > 0 else None
+    drawn = torch.as_tensor(size_weights(data, memory)) if settings.balance_union_sizes else None
 
     def batch_loss(rows: torch.Tensor) -> torch.Tensor:
         if drawn is not None:  # the loop's rows replaced by as many drawn by union size

@@ -108,8 +108,8 @@ def disjoint_union(a: Tensor, b: Tensor) -> Tensor:
 
     Why: it is the analytic answer at the far end of the overlap range (the elementwise minimum
     is the other: one part inside the other), exact for disjoint parts and close for parts that
-    meet along a thin band; on Test B (union types never trained on) it alone is nearer the true
-    union than the trained operator was (model card). Never above the minimum, and symmetric bit
+    meet along a thin band; on Test B (union types never trained on) it alone is as near the true
+    union as the trained operator (model card). Never above the minimum, and symmetric bit
     for bit (the sorted values of the same 2k numbers).
     """
     return torch.sort(torch.cat([a, b], dim=1), dim=1).values[:, : a.shape[1]]
