@@ -17,6 +17,8 @@ retired after ``tasks_per_worker`` solves (0: never): a worker's resident memory
 """
 
 import asyncio
+import ctypes
+import ctypes.util
 import gc
 import multiprocessing
 import os
@@ -80,7 +82,24 @@ def _solve_task(data: bytes, file_type: str, options: SpectrumOptions, vectors: 
     except MemoryError:
         pass
     gc.collect()
+    _return_freed_heap()
     raise SolveMemoryExceeded("the solve needed more memory than a solver worker may use")
+
+
+def _return_freed_heap() -> None:
+    """Give the heap's free top back to the system (glibc ``malloc_trim``), where there is one.
+
+    glibc serves mid-sized arrays from its heap once large ones have been freed, and keeps up to
+    64 MB of freed heap mapped. Under the cap that is address space the next upload's arrays
+    cannot have: after a large grid failed late in its solve the worker stayed 26–49 MB above its
+    idle size (measured here and on CI) until trimmed.
+    """
+    libc_name = ctypes.util.find_library("c")
+    if libc_name is None:
+        return
+    libc = ctypes.CDLL(libc_name)
+    if hasattr(libc, "malloc_trim"):
+        libc.malloc_trim(0)
 
 
 class SolveTimeout(InputError):
