@@ -11,6 +11,10 @@ import numpy as np
 
 UNION_FILE, LOCALIZER_FILE = "union.onnx", "localizer.onnx"
 UNION_INPUTS = ("spectrum_a", "spectrum_b")  # float32 (batch, k), eigenvalues in 1/m², ascending
+# float32 (batch, 1): the share of the smaller part's area inside the other (0 … 1), where the
+# caller knows it; UNKNOWN_OVERLAP where not. Graphs exported before it have no such input.
+UNION_OVERLAP_INPUT = "overlap"
+UNKNOWN_OVERLAP = -1.0
 UNION_OUTPUTS = ("union", "sigma")  # float32 (batch, k): the union's eigenvalues and their σ
 LOCALIZER_INPUTS = ("spectrum",)  # float32 (batch, k)
 LOCALIZER_OUTPUTS = ("probability",)  # float32 (batch, template vertices)
@@ -33,6 +37,10 @@ def spectrum_definition() -> dict[str, int]:
     return {"version": SPECTRUM_VERSION, "max_hole_edges": MAX_HOLE_EDGES}
 
 
-def union_feeds(a: np.ndarray, b: np.ndarray) -> dict[str, np.ndarray]:
-    """The union graph's inputs for operands of shape (batch, k)."""
-    return {UNION_INPUTS[0]: a.astype(np.float32), UNION_INPUTS[1]: b.astype(np.float32)}
+def union_feeds(a: np.ndarray, b: np.ndarray, overlap: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """The union graph's inputs for operands of shape (batch, k), and the overlap (batch, 1) for a
+    graph that reads one (None for one that does not)."""
+    feeds = {UNION_INPUTS[0]: a.astype(np.float32), UNION_INPUTS[1]: b.astype(np.float32)}
+    if overlap is not None:
+        feeds[UNION_OVERLAP_INPUT] = np.asarray(overlap, dtype=np.float32).reshape(-1, 1)
+    return feeds

@@ -34,6 +34,16 @@ def template_part(template: Template, removed: tuple[str, ...]) -> bytes:
     return mesh.export(file_type="ply")
 
 
+def sample_overlap(template: Template) -> float:
+    """The share of the smaller sample part's area inside the other (what ``overlap`` tells the
+    union operator): both are the template less some parts, so it is exact from its faces."""
+    face_area = trimesh.Trimesh(template.vertices, template.faces, process=False).area_faces
+    kept = [~np.isin(template.labels, [PART_NAMES.index(n) for n in removed]) for removed in PARTS.values()]
+    faces = [keep[template.faces].all(axis=1) for keep in kept]
+    both = face_area[faces[0] & faces[1]].sum()
+    return float(both / min(face_area[f].sum() for f in faces))
+
+
 def write_samples(folder: Path, template: Template) -> list[Path]:
     """Write the parts, the body and the parts' spectra into ``folder``; the paths written."""
     folder.mkdir(parents=True, exist_ok=True)

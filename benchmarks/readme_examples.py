@@ -20,7 +20,7 @@ import httpx
 
 from app.core.config import Settings
 from app.inference.template import Template
-from app.samples import write_samples
+from app.samples import sample_overlap, write_samples
 
 ROOT = Path(__file__).resolve().parents[1]
 README, EXAMPLES = ROOT / "README.md", ROOT / "app" / "api" / "examples.json"
@@ -94,6 +94,11 @@ def main() -> None:
         show(
             f'curl -s -F "spectra=$(cat spectra.json)" {url}/v1/union',
             client.post("/v1/union", data={"spectra": spectra}),
+        )
+        share = round(sample_overlap(Template.load(Settings().models_dir)), 2)
+        show(
+            f"curl -s -F \"spectra=$(cat spectra.json)\" '{url}/v1/union?overlap={share}'",
+            client.post("/v1/union", params={"overlap": share}, data={"spectra": spectra}),
         )
         localized = client.post("/v1/localize", files=files(folder)).json()
         recorded["localize"] = rounded({**localized, "vertices": localized["vertices"][:5]})

@@ -99,9 +99,9 @@ def score_command(
     import json
 
     from training.learning.data import SpectralData
-    from training.learning.evaluate import evaluate, served_predictors
+    from training.learning.evaluate import evaluate, served_predictors, served_told_predictor
 
-    metrics = evaluate(SpectralData(data, seed=seed), *served_predictors(models))
+    metrics = evaluate(SpectralData(data, seed=seed), *served_predictors(models), served_told_predictor(models))
     out.write_text(json.dumps(metrics, indent=1))
     typer.echo(f"scored {models} on {data}: {len(metrics['rows'])} rows, {len(metrics['strata'])} strata → {out}")
 

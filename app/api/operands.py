@@ -8,6 +8,7 @@ error names the operand it is about.
 
 import asyncio
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
@@ -20,6 +21,7 @@ from app.core.config import Settings
 from app.core.errors import InputError
 from app.geometry.io import resolve_file_type
 from app.geometry.pipeline import SpectrumOptions, SpectrumReport
+from app.inference.models import InvalidOverlap
 from app.inference.spectra import InvalidSpectrum, checked_spectrum
 
 MAX_OPERANDS = 32
@@ -36,6 +38,28 @@ SpectraField = Annotated[
 ]
 UnitsQuery = Annotated[Literal["m", "cm", "mm"], Query(description="Units of the uploaded files.")]
 ScaleQuery = Annotated[float | None, Query(gt=0, description="Factor to metres for the files; overrides units.")]
+OverlapQuery = Annotated[
+    str | None,
+    Query(
+        description="Where the client knows it (e.g. from a scanner's tracked camera poses): the share of the "
+        "smaller operand's area lying inside the other, 0 to 1, one per union step, comma-separated (operands "
+        "− 1 of them: the union so far and the next operand), e.g. 0.94 or 1,0.6. Two part spectra do not "
+        "tell how much the parts overlap: told it, the operator need not guess (the model card measures what "
+        "it gains). Omit it when unknown.",
+        max_length=4096,
+        examples=["0.94"],
+    ),
+]
+
+
+def parse_overlaps(text: str | None) -> list[float] | None:
+    """The ``overlap`` query parameter as one share per union step (None: not told)."""
+    if text is None:
+        return None
+    try:
+        return [float(value) for value in text.split(",")]
+    except ValueError:
+        raise InvalidOverlap(f"overlap must be comma-separated numbers, got {text[:40]!r}") from None
 
 
 @dataclass(frozen=True)
@@ -105,8 +129,11 @@ async def resolve_operands(
     k: int,
     units: Literal["m", "cm", "mm"],
     scale: float | None,
+    check_count: Callable[[int], object] | None = None,
 ) -> tuple[list[Operand], float]:
-    """Every operand's spectrum (at least one), and the milliseconds spent solving uploaded files."""
+    """Every operand's spectrum (at least one), and the milliseconds spent solving uploaded files.
+    ``check_count`` sees how many operands there are before any upload is solved (a mismatch
+    it raises costs no solve)."""
     given = parse_spectra(spectra, k)
     files = files or []
     count = len(files) + len(given)
@@ -119,6 +146,8 @@ async def resolve_operands(
             "Invalid request",
             f"at most {MAX_OPERANDS} operands (files and spectra), got {count}",
         )
+    if check_count is not None:
+        check_count(count)
     options = upload_options(settings, k, units, scale)
     sources = [f"files[{index}] {upload.filename or ''}".strip() for index, upload in enumerate(files)]
     started = time.perf_counter()

@@ -72,6 +72,7 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
     ],
     422: [
         ("invalid-spectrum", "Invalid spectrum", "spectra[1] is not in ascending order"),
+        ("invalid-overlap", "Invalid overlap", "2 overlaps for 2 operands: give one per union step (1)"),
         ("invalid-geometry", "Invalid geometry", "files[0] scan.ply: 1 vertices have NaN or infinite coordinates"),
         ("invalid-request", "Invalid request", "query.top: Input should be less than or equal to 100"),
         (
@@ -131,7 +132,7 @@ UPLOAD_SLUGS = frozenset(
         "upload-storage-full",
     }
 )
-MODEL_SLUGS = frozenset({"invalid-spectrum", "models-unavailable"})  # routes that run the models
+MODEL_SLUGS = frozenset({"invalid-spectrum", "invalid-overlap", "models-unavailable"})  # routes that run the models
 DATABASE_SLUGS = frozenset({"database-unavailable"})  # routes that read or write the store
 
 

@@ -12,10 +12,10 @@ import numpy as np
 from fastapi import Request, UploadFile
 
 from app.api.metrics import INFERENCE
-from app.api.operands import Operand, resolve_operands
+from app.api.operands import Operand, parse_overlaps, resolve_operands
 from app.core.config import Settings
 from app.geometry.plausibility import size_warnings
-from app.inference.models import SpectralModels, UnionEstimate
+from app.inference.models import SpectralModels, UnionEstimate, checked_overlaps
 
 
 @dataclass(frozen=True)
@@ -51,12 +51,21 @@ async def union_of_operands(
     spectra: str | None,
     units: Literal["m", "cm", "mm"],
     scale: float | None,
+    overlap: str | None = None,
 ) -> UnionOutcome:
-    """Resolve the operands (solving uploaded files) and fold them through the union operator."""
-    operands, solve_ms = await resolve_operands(request, settings, files, spectra, models.k, units, scale)
+    """Resolve the operands (solving uploaded files) and fold them through the union operator,
+    told the overlap of each step where the client knows it."""
+    overlaps = parse_overlaps(overlap)
+
+    def check_overlaps(count: int) -> list[float]:
+        return checked_overlaps(overlaps, count, models.reads_overlap)
+
+    operands, solve_ms = await resolve_operands(
+        request, settings, files, spectra, models.k, units, scale, check_count=check_overlaps
+    )
     started = time.perf_counter()
     values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
-    result = await anyio.to_thread.run_sync(models.union, values)
+    result = await anyio.to_thread.run_sync(models.union, values, overlaps)
     seconds = time.perf_counter() - started
     INFERENCE.labels("union").observe(seconds)
     warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]

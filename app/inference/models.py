@@ -21,8 +21,11 @@ from app.contract import (
     RECONSTRUCTION_FILE,
     RECONSTRUCTION_INPUTS,
     UNION_FILE,
+    UNION_OVERLAP_INPUT,
+    UNKNOWN_OVERLAP,
     union_feeds,
 )
+from app.core.errors import InputError
 from app.geometry.laplacian import mesh_operators
 from app.inference.manifest import verify_manifest
 from app.inference.spectra import InvalidSpectrum
@@ -43,6 +46,29 @@ class UnionEstimate:
     @property
     def upper(self) -> np.ndarray:
         return self.eigenvalues + INTERVAL_Z * self.sigma
+
+
+class InvalidOverlap(InputError):
+    """Overlaps that do not fit the operands, or that the served union operator cannot read."""
+
+    slug = "invalid-overlap"
+    title = "Invalid overlap"
+
+
+def checked_overlaps(overlaps: list[float] | None, operands: int, readable: bool) -> list[float]:
+    """One overlap per union step (``operands`` − 1 of them), each a share in 0 … 1; unknown for
+    every step when none are given."""
+    if overlaps is None:
+        return [UNKNOWN_OVERLAP] * max(operands - 1, 0)
+    if not readable:
+        raise InvalidOverlap("the served union operator does not read overlaps; send the request without them")
+    if len(overlaps) != operands - 1:
+        steps = operands - 1
+        raise InvalidOverlap(f"{len(overlaps)} overlaps for {operands} operands: give one per union step ({steps})")
+    for i, value in enumerate(overlaps):
+        if not 0.0 <= value <= 1.0:  # NaN fails too
+            raise InvalidOverlap(f"overlap[{i}] is {value}: a share of the smaller part, from 0 to 1")
+    return list(overlaps)
 
 
 @dataclass(frozen=True)
@@ -91,6 +117,8 @@ class SpectralModels:
         self.union_session = _session(directory / UNION_FILE, threads)
         self.localizer_session = _session(directory / LOCALIZER_FILE, threads)
         self.k = int(self.union_session.get_inputs()[0].shape[1])
+        # Graphs exported before the overlap input have none: they answer unions without it.
+        self.reads_overlap = UNION_OVERLAP_INPUT in {node.name for node in self.union_session.get_inputs()}
         vertex_count = self.localizer_session.get_outputs()[0].shape[1]
         if vertex_count != len(self.template.vertices):
             raise ValueError(f"localizer predicts {vertex_count} vertices, template has {len(self.template.vertices)}")
@@ -108,12 +136,16 @@ class SpectralModels:
         digest = hashlib.sha256(b"".join((directory / name).read_bytes() for name in served))
         self.version = digest.hexdigest()[:12]  # content hash: two replicas agree iff they serve the same models
 
-    def union(self, spectra: list[np.ndarray]) -> UnionEstimate:
+    def union(self, spectra: list[np.ndarray], overlaps: list[float] | None = None) -> UnionEstimate:
         """Union of the spectra, folded left to right: ((A ∪ B) ∪ C) ∪ …, as trained; one is
-        returned as is. σ carries each inner union's uncertainty on (:func:`chained_sigma`)."""
+        returned as is. σ carries each inner union's uncertainty on (:func:`chained_sigma`).
+        ``overlaps``, one per step where the caller knows them: the share of the smaller operand
+        inside the other (the union so far and the next operand); see :func:`checked_overlaps`."""
+        steps = checked_overlaps(overlaps, len(spectra), self.reads_overlap)
         current, sigma = spectra[0].astype(np.float64), np.zeros(self.k)
-        for other in spectra[1:]:
-            union, step_sigma = self.union_session.run(None, union_feeds(current[None], other[None]))
+        for other, overlap in zip(spectra[1:], steps, strict=True):
+            told = np.array([overlap]) if self.reads_overlap else None
+            union, step_sigma = self.union_session.run(None, union_feeds(current[None], other[None], told))
             sigma = chained_sigma(current, sigma, union[0].astype(np.float64), step_sigma[0].astype(np.float64))
             current = union[0].astype(np.float64)
         _require_finite(current, sigma)

@@ -57,11 +57,14 @@ class TripleTable:
 @dataclass(frozen=True)
 class ChainTable:
     """Test C chains of consecutive session views: spectra (c, views, k) of the views and
-    (c, views − 1, k) of the unions of their prefixes (views 0…1, 0…2, …), and the shapes."""
+    (c, views − 1, k) of the unions of their prefixes (views 0…1, 0…2, …), the shapes, and the
+    template masks of the views (c, views) and of the prefix unions (c, views − 1)."""
 
     views: np.ndarray
     unions: np.ndarray
     shape: np.ndarray
+    view_masks: np.ndarray
+    union_masks: np.ndarray
 
 
 class SpectralData:
@@ -107,7 +110,14 @@ class SpectralData:
         chain_spectra = spectra[arrays["chain_spectra"]]  # (c, 9, k): 5 views, then 4 prefix unions
         whole = np.isfinite(chain_spectra).all(axis=(1, 2))
         views = (chain_spectra.shape[1] + 1) // 2
-        self.chains = ChainTable(chain_spectra[whole, :views], chain_spectra[whole, views:], arrays["chains"][whole, 0])
+        columns = arrays["chains"][whole]
+        self.chains = ChainTable(
+            chain_spectra[whole, :views],
+            chain_spectra[whole, views:],
+            columns[:, 0],
+            columns[:, 1 : 1 + views],
+            columns[:, 1 + views :],
+        )
 
     def complete_spectra(self) -> tuple[np.ndarray, np.ndarray]:
         """(shape indices, float64 spectra) of the complete posed bodies the build solved (the whole
@@ -127,6 +137,19 @@ class SpectralData:
     def mask_area(self, indices: np.ndarray) -> np.ndarray:
         """Template area (m²) of each of the masks ``indices``."""
         return self.masks(indices) @ self.vertex_area
+
+    def overlap_shares(self, mask_a: np.ndarray, mask_b: np.ndarray, chunk: int = 2048) -> np.ndarray:
+        """(len(mask_a),) the share of the smaller part's template area inside the other part, for
+        pairs of mask indices: the overlap strata's measure, and what a caller may tell the union
+        operator (UnionConfig.overlap_hint)."""
+        weights = self.vertex_area
+        shares = []
+        for start in range(0, len(mask_a), chunk):
+            window = slice(start, start + chunk)
+            a, b = self.masks(mask_a[window]), self.masks(mask_b[window])
+            smaller = np.minimum(a @ weights, b @ weights)
+            shares.append((a & b) @ weights / np.maximum(smaller, 1e-12))
+        return np.concatenate(shares) if shares else np.zeros(0)
 
     def masks(self, indices: np.ndarray) -> np.ndarray:
         """(len(indices), n) boolean template masks."""

@@ -11,8 +11,18 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import onnxruntime as ort
 
-from app.contract import INTERVAL_Z, LOCALIZER_FILE, LOCALIZER_INPUTS, MASK_THRESHOLD, UNION_FILE, union_feeds
+from app.contract import (
+    INTERVAL_Z,
+    LOCALIZER_FILE,
+    LOCALIZER_INPUTS,
+    MASK_THRESHOLD,
+    UNION_FILE,
+    UNION_OVERLAP_INPUT,
+    UNKNOWN_OVERLAP,
+    union_feeds,
+)
 from app.inference.models import chained_sigma
 from training.data.overlaps import CAMERA
 from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION
@@ -83,6 +93,9 @@ PAPER_IOU = {
 
 
 UnionPredictor = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # (a, b) → (union, σ)
+ToldPredictor = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # (a, b, overlap) → …
+# The told overlap as a caller measures it: the true share plus this much absolute noise (fixed seed).
+TOLD_NOISE = 0.1
 RegionPredictor = Callable[[np.ndarray], np.ndarray]  # spectra → (m, n) boolean template masks
 
 
@@ -94,24 +107,53 @@ def trained_predictors(
     return (lambda a, b: predict(union, a, b)), regions
 
 
+def told_predictor(union: UnionOperator) -> ToldPredictor | None:
+    """The operator told each pair's overlap, or None for one that does not read it."""
+    if not union.config.overlap_hint:
+        return None
+    return lambda a, b, overlap: predict(union, a, b, overlap=overlap)
+
+
 def served_predictors(models: Path, batch: int = 1024) -> tuple[UnionPredictor, dict[str, RegionPredictor]]:
     """The exported ONNX graphs of a models folder as the evaluator's predictors: how a committed
     model (this one or an earlier one) scores on a data set it was not evaluated on."""
     from training.learning.export import session
 
-    union_graph, localizer_graph = session(models / UNION_FILE), session(models / LOCALIZER_FILE)
+    told = served_told_predictor(models, batch)
+    localizer_graph = session(models / LOCALIZER_FILE)
 
     def union(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        outputs = [
-            union_graph.run(None, union_feeds(a[i : i + batch], b[i : i + batch])) for i in range(0, len(a), batch)
-        ]
-        return tuple(np.concatenate([o[j] for o in outputs]) for j in range(2))  # type: ignore[return-value]
+        if told is not None:  # a graph that reads the overlap, told none
+            return told(a, b, np.full(len(a), UNKNOWN_OVERLAP))
+        return _run_union(session(models / UNION_FILE), a, b, None, batch)
 
     def region(spectra: np.ndarray) -> np.ndarray:
         (probability,) = localizer_graph.run(None, {LOCALIZER_INPUTS[0]: spectra.astype(np.float32)})
         return probability >= MASK_THRESHOLD
 
     return union, {SERVED_LOCALIZER: region}
+
+
+def served_told_predictor(models: Path, batch: int = 1024) -> ToldPredictor | None:
+    """The exported union graph told each pair's overlap, or None for a graph without that input."""
+    from training.learning.export import session
+
+    graph = session(models / UNION_FILE)
+    if UNION_OVERLAP_INPUT not in {node.name for node in graph.get_inputs()}:
+        return None
+    return lambda a, b, overlap: _run_union(graph, a, b, overlap, batch)
+
+
+def _run_union(
+    graph: ort.InferenceSession, a: np.ndarray, b: np.ndarray, overlap: np.ndarray | None, batch: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """(union, σ) of an onnxruntime union graph, in batches."""
+    outputs = []
+    for start in range(0, len(a), batch):
+        window = slice(start, start + batch)
+        told = None if overlap is None else overlap[window]
+        outputs.append(graph.run(None, union_feeds(a[window], b[window], told)))
+    return np.concatenate([o[0] for o in outputs]), np.concatenate([o[1] for o in outputs])
 
 
 @dataclass
@@ -121,6 +163,7 @@ class Evaluator:
     data: SpectralData
     union: UnionPredictor
     localizers: dict[str, RegionPredictor]
+    told: ToldPredictor | None = None
 
     def __post_init__(self) -> None:
         pairs = self.data.pairs
@@ -158,8 +201,7 @@ class Evaluator:
 
     def strata(self, rows: PairTable) -> np.ndarray:
         """The overlap stratum (a name of ``STRATA``) of every row."""
-        a, b = self.data.masks(rows.mask_a), self.data.masks(rows.mask_b)
-        inside = (a & b) @ self.areas / np.maximum(np.minimum(a @ self.areas, b @ self.areas), 1e-12)
+        inside = self.data.overlap_shares(rows.mask_a, rows.mask_b)
         same_region = rows.mask_a == rows.mask_b
         identical = same_region & (rows.shape_a == rows.shape_b) & (rows.variant == MESH)
         labels = np.select(
@@ -178,6 +220,36 @@ class Evaluator:
                 selection = np.flatnonzero((labels == stratum) & (rows.variant == variant))
                 if len(selection):
                     out[f"{prefix}/{stratum}/{variant}"] = self.row(rows.rows(selection))
+        return out
+
+    def told_rows(self, rows: PairTable, labels: np.ndarray, prefix: str) -> dict:
+        """The operator told each pair's overlap, exactly and as measured (± ``TOLD_NOISE``), per
+        label (e.g. overlap stratum) and variant, keyed ``prefix/label/variant``; beside it the
+        operator not told, on the same rows."""
+        if self.told is None:
+            return {}
+        shares = self.data.overlap_shares(rows.mask_a, rows.mask_b)
+        noise = np.random.default_rng(0).normal(0.0, TOLD_NOISE, len(shares))
+        answers = {
+            "not_told": self.union(rows.a, rows.b),
+            "told": self.told(rows.a, rows.b, shares),
+            "told_noisy": self.told(rows.a, rows.b, np.clip(shares + noise, 0.0, 1.0)),
+        }
+        out = {}
+        for label in np.unique(labels):
+            for variant in (MESH, REMESHED):
+                chosen = np.flatnonzero((labels == label) & (rows.variant == variant))
+                if not len(chosen):
+                    continue
+                truth = rows.union[chosen]
+                out[f"{prefix}/{label}/{variant}"] = {
+                    "rows": len(chosen),
+                    "union": {name: spectral_errors(mean[chosen], truth) for name, (mean, _) in answers.items()},
+                    "interval_coverage": {
+                        name: float(np.mean(np.abs(mean[chosen] - truth) <= INTERVAL_Z * sigma[chosen]))
+                        for name, (mean, sigma) in answers.items()
+                    },
+                }
         return out
 
     def camera_kinds(self, rows: PairTable) -> dict:
@@ -199,12 +271,18 @@ class Evaluator:
             return out
         views = chains.views
         current = {"operator": views[:, 0], "lookup": views[:, 0], "disjoint_union": views[:, 0]}
+        if self.told is not None:
+            current["operator_told"] = views[:, 0]
         sigma = np.zeros_like(views[:, 0])
         for length in range(2, views.shape[1] + 1):
             step = views[:, length - 1]
             union, step_sigma = self.union(current["operator"], step)
             sigma = chained_sigma(current["operator"], sigma, union, step_sigma)
             current["operator"] = union
+            if self.told is not None:  # told the share of the smaller of (views so far, next view) inside the other
+                so_far = chains.view_masks[:, 0] if length == 2 else chains.union_masks[:, length - 3]
+                shares = self.data.overlap_shares(so_far, chains.view_masks[:, length - 1])
+                current["operator_told"] = self.told(current["operator_told"], step, shares)[0]
             current["lookup"] = self.lookup.predict(current["lookup"], step)
             current["disjoint_union"] = disjoint_union(current["disjoint_union"], step)
             if length < 3:
@@ -264,9 +342,15 @@ class Evaluator:
         return {"rows": int(finite.sum()), **spectral_errors(moved_array[finite], truth_array[finite])}
 
 
-def evaluate(data: SpectralData, union: UnionPredictor, localizers: dict[str, RegionPredictor]) -> dict:
-    """metrics.json's content: every test row, overlap strata, chains, point clouds and the noise floor."""
-    evaluator = Evaluator(data, union, localizers)
+def evaluate(
+    data: SpectralData,
+    union: UnionPredictor,
+    localizers: dict[str, RegionPredictor],
+    told: ToldPredictor | None = None,
+) -> dict:
+    """metrics.json's content: every test row, overlap strata, chains, point clouds and the noise
+    floor; and, for an operator that reads the overlap (``told``), Test B and Test C told it."""
+    evaluator = Evaluator(data, union, localizers, told)
     pairs = data.pairs
     random_pairs = np.isin(pairs.scenario, [FULL_COVERAGE, PARTIAL_UNION])  # the paper's kinds of pair
     rows = {}
@@ -278,8 +362,12 @@ def evaluate(data: SpectralData, union: UnionPredictor, localizers: dict[str, Re
                     rows[f"{split}/{group}/{variant}"] = evaluator.row(pairs.rows(np.flatnonzero(selection)))
     test_c = pairs.rows(np.flatnonzero(pairs.split == "test_c"))
     overlapping_a = pairs.rows(np.flatnonzero((pairs.split == "test_a") & ~random_pairs))
+    test_b = pairs.rows(np.flatnonzero((pairs.split == "test_b") & (pairs.variant != CLOUD)))
+    told = evaluator.told_rows(test_c, evaluator.strata(test_c), "test_c")
+    told |= evaluator.told_rows(test_b, test_b.group, "test_b")
     return {
         "rows": rows,
+        **({"overlap_told": told} if told else {}),
         "strata": {**evaluator.stratified(test_c, "test_c"), **evaluator.stratified(overlapping_a, "test_a")},
         "test_c_kinds": evaluator.camera_kinds(test_c),
         "test_c_chains": evaluator.session_chains(),

@@ -21,6 +21,8 @@ from app.contract import (
     RECONSTRUCTION_OUTPUTS,
     UNION_INPUTS,
     UNION_OUTPUTS,
+    UNION_OVERLAP_INPUT,
+    UNKNOWN_OVERLAP,
     union_feeds,
 )
 from training.learning.localizer_net import Localizer
@@ -55,10 +57,27 @@ def _export(model: torch.nn.Module, example: tuple[torch.Tensor, ...], path: Pat
     onnx.save(graph, str(path))
 
 
+class _WithOverlap(torch.nn.Module):
+    """The operator as served when it reads the overlap: (a, b, overlap) → (union, σ)."""
+
+    def __init__(self, model: UnionOperator) -> None:
+        super().__init__()
+        self.model = model
+
+    def forward(self, a: torch.Tensor, b: torch.Tensor, overlap: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.model(a, b, None, overlap)
+
+
 def export_union(model: UnionOperator, path: Path) -> None:
+    """The graph reads ``UNION_OVERLAP_INPUT`` too when the operator was trained to."""
     k = model.config.k
     example = torch.linspace(1, 60, k).repeat(2, 1)
-    _export(model, (example, example * 1.5), path, UNION_INPUTS, UNION_OUTPUTS)
+    if model.config.overlap_hint:
+        overlap = torch.tensor([[0.5], [UNKNOWN_OVERLAP]])
+        inputs = (*UNION_INPUTS, UNION_OVERLAP_INPUT)
+        _export(_WithOverlap(model), (example, example * 1.5, overlap), path, inputs, UNION_OUTPUTS)
+    else:
+        _export(model, (example, example * 1.5), path, UNION_INPUTS, UNION_OUTPUTS)
 
 
 def export_localizer(model: Localizer, path: Path) -> None:
@@ -75,11 +94,15 @@ def session(path: Path) -> ort.InferenceSession:
     return ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
 
 
-def union_parity(model: UnionOperator, path: Path, a: np.ndarray, b: np.ndarray) -> float:
-    """Largest relative difference between onnxruntime and PyTorch on these operands."""
+def union_parity(
+    model: UnionOperator, path: Path, a: np.ndarray, b: np.ndarray, overlap: np.ndarray | None = None
+) -> float:
+    """Largest relative difference between onnxruntime and PyTorch on these operands (and
+    overlaps, for an operator that reads them)."""
+    told = None if overlap is None else torch.as_tensor(overlap, dtype=torch.float32).reshape(-1, 1)
     with torch.no_grad():
-        expected = model.eval()(torch.as_tensor(a), torch.as_tensor(b))
-    got = session(path).run(None, union_feeds(a, b))
+        expected = model.eval()(torch.as_tensor(a), torch.as_tensor(b), None, told)
+    got = session(path).run(None, union_feeds(a, b, overlap))
     return max(_relative(g, e.numpy()) for g, e in zip(got, expected, strict=True))
 
 

@@ -69,28 +69,42 @@ def law_parts(sampler: RegionSampler, count: int = 12, seed: int = SEED) -> LawP
 
 
 def measure_laws(models: SpectralModels, parts: LawParts, seed: int = SEED) -> dict[str, list[float]]:
-    """Per-case relative errors of each law, and each case's largest excess over min(a, b)."""
+    """Per-case relative errors of each law, and each case's largest excess over min(a, b); for an
+    operator that reads the overlap, the same laws again told it (``…_told``: the share of the
+    smaller part inside the other is 1 for nested parts, one region twice and a part with the
+    whole body; random shares for the bound)."""
 
-    def union(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return models.union([a, b]).eigenvalues
+    def union(a: np.ndarray, b: np.ndarray, overlap: float | None = None) -> np.ndarray:
+        return models.union([a, b], None if overlap is None else [overlap]).eigenvalues
 
     pairs = [*parts.nested, *parts.views]
     singles = [s for pair in parts.nested for s in pair]
     rng = np.random.default_rng(seed + 1)
     arbitrary = [np.sort(rng.uniform(0.1, 500, len(parts.body))) for _ in range(20)]
     pool = singles + arbitrary
-    excess = []
+    draws = []
     for _ in range(60):
         i, j = rng.choice(len(pool), 2, replace=False)
-        a, b = pool[i], pool[j] * rng.uniform(0.2, 5)
-        excess.append(float(np.max(union(a, b) / np.maximum(np.minimum(a, b), 1e-12) - 1)))
-    return {
-        "idempotence": [relative_error(union(s, s), s) for s in singles],
-        "same_region": [
-            relative_error(union(o, r), o) for (_, o), r in zip(parts.nested, parts.remeshed_outer, strict=True)
-        ],
-        "absorption": [relative_error(union(a, b), b) for a, b in pairs],
-        "whole_body": [relative_error(union(a, parts.body)[1:], parts.body[1:]) for a, _ in parts.nested],
-        "whole_body_lambda1": [float(union(a, parts.body)[0] / parts.body[1]) for a, _ in parts.nested],
-        "excess_over_minimum": excess,
-    }
+        draws.append((pool[i], pool[j] * rng.uniform(0.2, 5), float(rng.uniform(0, 1))))
+    laws = {}
+    for told in (None, 1.0) if models.reads_overlap else (None,):
+        suffix = "" if told is None else "_told"
+        laws |= {
+            f"idempotence{suffix}": [relative_error(union(s, s, told), s) for s in singles],
+            f"same_region{suffix}": [
+                relative_error(union(o, r, told), o)
+                for (_, o), r in zip(parts.nested, parts.remeshed_outer, strict=True)
+            ],
+            f"absorption{suffix}": [relative_error(union(a, b, told), b) for a, b in pairs],
+            f"whole_body{suffix}": [
+                relative_error(union(a, parts.body, told)[1:], parts.body[1:]) for a, _ in parts.nested
+            ],
+            f"whole_body_lambda1{suffix}": [
+                float(union(a, parts.body, told)[0] / parts.body[1]) for a, _ in parts.nested
+            ],
+            f"excess_over_minimum{suffix}": [
+                float(np.max(union(a, b, None if told is None else share) / np.maximum(np.minimum(a, b), 1e-12) - 1))
+                for a, b, share in draws
+            ],
+        }
+    return laws

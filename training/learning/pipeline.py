@@ -20,7 +20,7 @@ from app.retrieval.seed import SEED_FILE
 from training.learning.baselines import elementwise_min, larger_part
 from training.learning.card import update_card
 from training.learning.data import SpectralData
-from training.learning.evaluate import evaluate, trained_predictors
+from training.learning.evaluate import evaluate, told_predictor, trained_predictors
 from training.learning.export import export_localizer, export_union, localizer_parity, union_parity
 from training.learning.fit import is_finished, validation_history
 from training.learning.localizer_net import Localizer, LocalizerConfig
@@ -43,12 +43,25 @@ _REMESHED = TrainingPreset(
     LocalizerTraining(epochs=8, batch=128, first_restart=8),
 )
 TRAINING_PRESETS = {
-    "tiny": TrainingPreset(UnionTraining(epochs=2, batch=8, chain_batch=2), LocalizerTraining(epochs=2, batch=16)),
+    "tiny": TrainingPreset(
+        UnionTraining(epochs=2, batch=8, chain_batch=2),
+        LocalizerTraining(epochs=2, batch=16),
+        UnionConfig(disjoint_prior=True, overlap_hint=True),  # as the standard preset's
+    ),
     # Sized for a 2-core CPU: the transformer correction takes ~2.5 min per epoch on one core (it
     # is launch-bound: small matrices, many operations), the localizers ~25 min in all. The
     # union's best epoch was the 8th of 24 before the overlap rows came, the 10th of 16 after
     # (validation mae 10.80; 10.9–11.4 in the six epochs after it): 12 epochs, one cosine cycle.
+    # The served union operator reads the operands' disjoint union and, where a caller tells it, how
+    # much of the smaller part lies inside the other (UnionConfig.overlap_hint; told for half the
+    # training rows, with noise).
     "standard": TrainingPreset(
+        UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0),
+        LocalizerTraining(epochs=8, batch=128, first_restart=8),
+        UnionConfig(disjoint_prior=True, overlap_hint=True),
+    ),
+    # The operator served before it (model b8fb3a571cc7): neither read.
+    "standard-untold": TrainingPreset(
         UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0),
         LocalizerTraining(epochs=8, batch=128, first_restart=8),
     ),
@@ -162,11 +175,12 @@ def run_pipeline(
         shutil.copyfile(data_dir / "template" / name, models / name)
     write_manifest(models)
     real = data.pairs.rows(np.flatnonzero(data.pairs.split != "train"))
+    told = data.overlap_shares(real.mask_a, real.mask_b) if union.config.overlap_hint else None
     parity = {
-        "union": union_parity(union, models / UNION_FILE, real.a, real.b),
+        "union": union_parity(union, models / UNION_FILE, real.a, real.b, told),
         "localizer": localizer_parity(localizers[SERVED_LOCALIZER], models / LOCALIZER_FILE, real.union),
     }
-    metrics = evaluate(data, *trained_predictors(union, localizers))
+    metrics = evaluate(data, *trained_predictors(union, localizers), told_predictor(union))
     labels, complete, identity = complete_shapes(data)
     save_seed(models / SEED_FILE, labels, complete)
     metrics["retrieval"] = retrieval_table(data, retrieval_queries(data, union), complete, identity)
@@ -184,14 +198,19 @@ def run_pipeline(
 
 
 def retrieval_queries(data: SpectralData, union) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Full-coverage test pairs (every variant): their predicted union and two part-only baselines."""
+    """Full-coverage test pairs (every variant): their predicted union (and, for an operator that
+    reads it, their union told their overlap) and two part-only baselines."""
     pairs = data.pairs
     rows = pairs.rows(
         np.flatnonzero((pairs.split != "train") & (pairs.split != "validation") & (pairs.scenario == "full"))
     )
     areas = data.mask_area(rows.mask_a), data.mask_area(rows.mask_b)
-    return {
+    queries = {
         "operator_union": (predict(union, rows.a, rows.b)[0], rows.shape_a),
         "elementwise_min": (elementwise_min(rows.a, rows.b), rows.shape_a),
         "larger_part": (larger_part(rows.a, rows.b, *areas), rows.shape_a),
     }
+    if union.config.overlap_hint:  # the same pairs, each told how much its parts overlap
+        told = data.overlap_shares(rows.mask_a, rows.mask_b)
+        queries["operator_union_told"] = (predict(union, rows.a, rows.b, overlap=told)[0], rows.shape_a)
+    return queries

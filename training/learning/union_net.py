@@ -39,6 +39,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from app.contract import UNKNOWN_OVERLAP
+
 EPSILON = 1e-3  # keeps the zero λ₁ of a closed (full-body) union finite in log space
 SIGMA_FLOOR = 1e-2  # the smallest relative σ before calibration (the pose noise floor is ~2 %)
 SHORTLIST = 128  # memory rows beyond those asked for whose float64 distance decides (UnionMemory)
@@ -60,6 +62,11 @@ class UnionConfig:
     # The correction also reads the operands' disjoint union (:func:`disjoint_union`), the union
     # of two parts that share nothing: the other end of the overlap range from the minimum.
     disjoint_prior: bool = False
+    # The operator also reads, when a caller knows it, how much of the smaller part lies inside
+    # the other (``overlap``, 0 … 1; unknown when negative, UNKNOWN_OVERLAP): two part spectra do
+    # not tell how much the parts overlap (benchmarks/nesting_ambiguity.py), and without it the
+    # answer regresses toward the training set's typical overlap.
+    overlap_hint: bool = False
     width: int = 256  # DeepSets hidden width
     # The transformers: the paper's (supplementary, "Architecture details"): T_A, which mixes the
     # two operands' tokens, 8 heads × 6 layers with a feed-forward of 64; T_B, which only
@@ -88,8 +95,18 @@ class UnionConfig:
     @property
     def prior_rows(self) -> int:
         """Spectra the correction reads beside the operands: both kinds of prior per neighbour,
-        and the disjoint union if asked for."""
-        return 2 * self.neighbours + int(self.disjoint_prior)
+        the disjoint union if asked for, and the overlap hint's value and whether it is known."""
+        return 2 * self.neighbours + int(self.disjoint_prior) + 2 * int(self.overlap_hint)
+
+
+def overlap_rows(overlap: Tensor | None, like: Tensor) -> tuple[Tensor, Tensor]:
+    """The hint as the correction reads it, (B, 2, k): its value (0 when unknown) and 1 where it
+    is known, at every eigenvalue index; and ``told`` (B, 1), 1 where it is known."""
+    if overlap is None:
+        overlap = torch.full_like(like[:, :1], UNKNOWN_OVERLAP)
+    told = (overlap >= 0).to(like.dtype)
+    value = torch.clamp(overlap, min=0.0, max=1.0) * told
+    return torch.stack([value.expand_as(like), told.expand_as(like)], dim=1), told
 
 
 def common_scale(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -313,7 +330,7 @@ class Proposal(NamedTuple):
     scale (B, 1); both operands and their minimum in z (B, k); what each neighbour's parts added
     (B, n, k) and that taken off this pair's minimum; the neighbours' key distances (B, n); the
     coincidence gate (B, 1); the corrected prior (B, k) and the network's decrease from the
-    minimum (B, k; None for the PRIOR parametrization)."""
+    minimum (B, k; None for the PRIOR parametrization); 1 where the caller told the overlap (B, 1)."""
 
     scale: Tensor
     za: Tensor
@@ -325,6 +342,7 @@ class Proposal(NamedTuple):
     gate: Tensor
     proposed: Tensor
     decrease: Tensor | None
+    told: Tensor
 
 
 def _sigma_weights_of_older_states(module: nn.Module, state: dict, prefix: str, *_: object) -> None:
@@ -355,6 +373,7 @@ class UnionOperator(nn.Module):
         self.register_buffer("sigma_decrease", torch.zeros(()))
         self.register_buffer("sigma_disagreement", torch.zeros(()))
         self.register_buffer("sigma_split", torch.zeros(()))
+        self.register_buffer("sigma_told", torch.ones(()))  # σ's factor where the overlap is told
         # The blend of the network's decrease with the neighbours' (:meth:`blended`): fitted on
         # validation pairs each time a run is loaded (deterministic, seconds), never trained, so
         # not part of the saved state; unfitted, its weight is 0.
@@ -362,23 +381,31 @@ class UnionOperator(nn.Module):
         self.register_load_state_dict_pre_hook(_sigma_weights_of_older_states)
 
     def forward(
-        self, a: torch.Tensor, b: torch.Tensor, exclude: torch.Tensor | None = None
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        parts = self.proposal(a, b, exclude)
+        self, a: Tensor, b: Tensor, exclude: Tensor | None = None, overlap: Tensor | None = None
+    ) -> tuple[Tensor, Tensor]:
+        """``overlap`` (B, 1): the share of the smaller part inside the other where a caller knows
+        it, negative where not (None: unknown for all); read only with ``config.overlap_hint``."""
+        parts = self.proposal(a, b, exclude, overlap)
         if self.config.parametrization == MONOTONE:
             median, features = self.blend_terms(parts)
             split = (parts.decrease - median).abs()  # the network's and the neighbours' answers apart
-            decrease = parts.decrease if self.training else self.blended(parts.decrease, median, features)
+            if self.training:
+                decrease = parts.decrease
+            else:
+                decrease = self.blended(parts.decrease, median, features, parts.told)
             z = parts.floor - decrease
         else:
             z, decrease = parts.proposed, torch.zeros_like(parts.proposed)
             split = decrease
         union = torch.sort(torch.relu(torch.exp(z) - EPSILON), dim=-1).values
         disagreement = (1 - parts.gate) * (parts.za - parts.zb).abs()  # of operands taken for one region
-        sigma = self.sigma(union, parts.transferred, decrease, disagreement, split)
+        factor = 1 + parts.told * (self.sigma_told - 1)
+        sigma = self.sigma(union, parts.transferred, decrease, disagreement, split, factor)
         return union * parts.scale, sigma * parts.scale
 
-    def proposal(self, a: Tensor, b: Tensor, exclude: Tensor | None = None) -> "Proposal":
+    def proposal(
+        self, a: Tensor, b: Tensor, exclude: Tensor | None = None, overlap: Tensor | None = None
+    ) -> "Proposal":
         """What the memory and the correction say about a pair, before the blend (:meth:`blended`)."""
         scale = common_scale(a, b)
         za, zb = relative_log(a, scale), relative_log(b, scale)
@@ -390,11 +417,16 @@ class UnionOperator(nn.Module):
         read = [priors, transferred]
         if self.config.disjoint_prior:
             read.append(relative_log(disjoint_union(a, b), scale)[:, None])
+        hint, told = overlap_rows(overlap, floor)
+        if self.config.overlap_hint:
+            read.append(hint)
+        else:
+            told = torch.zeros_like(told)  # a hint this operator cannot read is not told
         change = self.correction(za, zb, torch.cat(read, dim=1), distances)
         gate = self.coincidence(za, zb)
         proposed = priors[:, 0] + change
         decrease = self.decreased(floor, proposed, gate) if self.config.parametrization == MONOTONE else None
-        return Proposal(scale, za, zb, floor, added, transferred, distances, gate, proposed, decrease)
+        return Proposal(scale, za, zb, floor, added, transferred, distances, gate, proposed, decrease, told)
 
     @staticmethod
     def blend_terms(parts: "Proposal") -> tuple[Tensor, Tensor]:
@@ -419,7 +451,7 @@ class UnionOperator(nn.Module):
         )
         return parts.gate * median, features
 
-    def blended(self, decrease: Tensor, median: Tensor, features: Tensor) -> Tensor:
+    def blended(self, decrease: Tensor, median: Tensor, features: Tensor, told: Tensor) -> Tensor:
         """The network's decrease blended with the neighbours' median decrease (gated), outside
         training: w = sigmoid(features · ``blend_weights``) per pair, fitted on validation pairs
         after training (``train_union.fit_blend``).
@@ -430,9 +462,11 @@ class UnionOperator(nn.Module):
         trust is read off the neighbours themselves (their agreement, distance, and median) and
         the gate. Both decreases are non-negative and zero for one spectrum twice, so the blend
         keeps the bound, U(A, A) = A, commutativity and scale-equivariance. Unfitted (the
-        default: a bias of −∞), w = 0 exactly: the network alone, as trained.
+        default: a bias of −∞), w = 0 exactly: the network alone, as trained. Where the caller told
+        the overlap (``told``), w = 0 too: the neighbours are found by their spectra alone, whatever
+        their own overlap, and the network reads the hint they ignore.
         """
-        weight = torch.sigmoid(features @ self.blend_weights)[:, None]
+        weight = torch.sigmoid(features @ self.blend_weights)[:, None] * (1 - told)
         return (1 - weight) * decrease + weight * median
 
     def fitted(self) -> dict[str, float | list[float] | None]:
@@ -448,6 +482,7 @@ class UnionOperator(nn.Module):
             "sigma_decrease": float(self.sigma_decrease),
             "sigma_disagreement": float(self.sigma_disagreement),
             "sigma_split": float(self.sigma_split),
+            "sigma_told": float(self.sigma_told) if self.config.overlap_hint else None,
         }
 
     @torch.no_grad()
@@ -488,6 +523,10 @@ class UnionOperator(nn.Module):
         return gate * nn.functional.softplus(SHARPNESS * (floor - proposal)) / SHARPNESS
 
     @torch.no_grad()
+    def set_sigma_told(self, factor: float) -> None:
+        self.sigma_told.fill_(factor)
+
+    @torch.no_grad()
     def set_sigma_weights(
         self, spread: float, floor: float, decrease: float, disagreement: float, split: float = 0.0
     ) -> None:
@@ -499,7 +538,13 @@ class UnionOperator(nn.Module):
         self.sigma_split.fill_(split)
 
     def sigma(
-        self, union: Tensor, transferred: Tensor, decrease: Tensor, disagreement: Tensor, split: Tensor
+        self,
+        union: Tensor,
+        transferred: Tensor,
+        decrease: Tensor,
+        disagreement: Tensor,
+        split: Tensor,
+        factor: Tensor | float = 1.0,
     ) -> Tensor:
         """σ relative to the common scale, from how far the neighbours' answers lie from the
         prediction, how far the prediction lies below the operands' minimum, how far apart
@@ -527,9 +572,11 @@ class UnionOperator(nn.Module):
         ``train_union.calibrate`` —, ``sigma_decrease`` for the decrease, ``sigma_disagreement``
         for the third, ``sigma_split`` for the last). A learned σ
         head, trained by Gaussian likelihood next to the mean, cost the mean a tenth of its
-        accuracy (validation mae 5.1 → 5.5) and diverged on chains.
+        accuracy (validation mae 5.1 → 5.5) and diverged on chains. ``factor`` (B, 1) scales every
+        term but the floor: ``sigma_told`` for pairs told their overlap, who err less but whose
+        union is known no better than its meshing.
         """
         spread = (transferred - relative_log(union, 1.0)[:, None]).pow(2).mean(1).sqrt()
-        relative = spread * self.sigma_scale + self.sigma_floor + decrease * self.sigma_decrease
+        relative = spread * self.sigma_scale + decrease * self.sigma_decrease
         relative = relative + disagreement * self.sigma_disagreement + split * self.sigma_split
-        return relative * (union + EPSILON)
+        return (relative * factor + self.sigma_floor) * (union + EPSILON)

@@ -9,7 +9,7 @@ from pydantic import BaseModel, Field
 
 from app.api.deps import ModelsDep, SettingsDep
 from app.api.examples import success
-from app.api.operands import FilesField, ScaleQuery, SpectraField, UnitsQuery
+from app.api.operands import FilesField, OverlapQuery, ScaleQuery, SpectraField, UnitsQuery
 from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.api.unions import union_of_operands
 
@@ -53,11 +53,12 @@ async def union(
     spectra: SpectraField = None,
     units: UnitsQuery = "m",
     scale: ScaleQuery = None,
+    overlap: OverlapQuery = None,
 ) -> UnionResponse:
     """Spectrum of the union of partial scans of one body, with a 90 % interval.
 
     Two or more operands fold left to right, ((A ∪ B) ∪ C) ∪ …; one operand is returned as is
     (σ = 0). The result is exactly the same whichever order two operands come in.
     """
-    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale)
+    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, overlap)
     return UnionResponse(**outcome.fields(models))

@@ -45,3 +45,29 @@ def test_onnx_and_pytorch_break_exact_ties_alike(tmp_path):
         expected = [x.numpy() for x in model(torch.as_tensor(qa), torch.as_tensor(qb))]
     for g, e in zip(got, expected, strict=True):
         assert np.abs(g - e).max() <= 1e-4 * np.abs(e).max()
+
+
+def test_an_operator_that_reads_the_overlap_exports_it_as_an_input(tmp_path):
+    """The graph of an operator trained with the overlap hint takes ``overlap`` (batch, 1), told or
+    unknown per row, and answers as PyTorch does (random correction weights, so the hint matters);
+    one trained without it has no such input."""
+    rng = np.random.default_rng(2)
+    a, b = (np.cumsum(rng.uniform(1, 40, (300, 20)), axis=1) for _ in range(2))
+    union = np.minimum(a, b) * 0.7
+    for hint in (False, True):
+        model = UnionOperator(UnionConfig(disjoint_prior=True, overlap_hint=hint), UnionMemory(a, b, union))
+        torch.nn.init.normal_(model.correction.rho.weight, std=0.05)
+        model.set_sigma_told(0.5)
+        export_union(model.eval(), tmp_path / f"union-{hint}.onnx")
+        graph = session(tmp_path / f"union-{hint}.onnx")
+        assert ("overlap" in {node.name for node in graph.get_inputs()}) == hint
+    qa, qb = a[:64].astype(np.float32), b[::-1][:64].copy().astype(np.float32)
+    overlap = rng.uniform(0, 1, (64, 1)).astype(np.float32)
+    overlap[::4] = -1.0
+    got = graph.run(None, {"spectrum_a": qa, "spectrum_b": qb, "overlap": overlap})
+    with torch.no_grad():
+        expected = [x.numpy() for x in model(torch.as_tensor(qa), torch.as_tensor(qb), None, torch.as_tensor(overlap))]
+        nothing = model(torch.as_tensor(qa), torch.as_tensor(qb))[0].numpy()
+    for g, e in zip(got, expected, strict=True):
+        assert np.abs(g - e).max() <= 1e-4 * np.abs(e).max()
+    assert np.abs(expected[0] - nothing).max() > 1e-3 * np.abs(nothing).max()  # the hint changed the answer

@@ -31,7 +31,16 @@ PARAMETRIZATIONS = (PRIOR, MONOTONE)
 # The blend of the network's decrease with the neighbours' (UnionOperator.blended): unfitted (w = 0),
 # and weights that give every pair a weight of its own between 0 and 1.
 BLENDS = (None, (0.5, -2.0, 1.0, 0.3, 4.0))
-DISJOINT = (False, True)  # the correction reading the operands' disjoint union too, or not
+# What the correction reads beside the operands and the memory: nothing more, the operands' disjoint
+# union, or that and the overlap a caller tells (random shares, a third of them unknown).
+READS = ("plain", "disjoint", "told")
+
+
+def told_overlaps(count: int, seed: int) -> torch.Tensor:
+    """(count, 1) overlaps as callers tell them: shares in 0 … 1, every third one unknown (−1)."""
+    shares = torch.rand(count, 1, generator=torch.Generator().manual_seed(seed))
+    shares[::3] = -1.0
+    return shares
 
 
 def operator(
@@ -40,20 +49,31 @@ def operator(
     stored: int = 50,
     parametrization: str = MONOTONE,
     blend: tuple[float, ...] | None = None,
-    disjoint: bool = False,
+    reads: str = "plain",
 ) -> UnionOperator:
     """An operator with random weights (the correction's zero-initialised last layer too) over a
-    random memory, its blend set to ``blend`` (unfitted for None), reading the operands'
-    disjoint union if ``disjoint``."""
+    random memory, its blend set to ``blend`` (unfitted for None), reading what ``reads`` says
+    (a name of READS)."""
     memory = UnionMemory(spectra(stored, 100 + seed), spectra(stored, 200 + seed), spectra(stored, 300 + seed) / 2)
     torch.manual_seed(seed)
-    config = UnionConfig(correction=correction, parametrization=parametrization, disjoint_prior=disjoint)
+    config = UnionConfig(
+        correction=correction,
+        parametrization=parametrization,
+        disjoint_prior=reads != "plain",
+        overlap_hint=reads == "told",
+    )
     model = UnionOperator(config, memory)
     last = model.correction.rho if correction == "transformer" else model.correction.head[-1]
     torch.nn.init.normal_(last.weight, std=0.05)
     if blend is not None:
         model.set_blend_weights(blend)
+    model.set_sigma_told(0.6)
     return model.eval()
+
+
+def told(model: UnionOperator, count: int, seed: int) -> torch.Tensor | None:
+    """What a test tells ``model`` of its pairs' overlaps: :func:`told_overlaps` if it reads them."""
+    return told_overlaps(count, seed) if model.config.overlap_hint else None
 
 
 def relative_logs(a: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -138,38 +158,40 @@ def test_an_untrained_monotone_operator_returns_the_prior_below_the_minimum(corr
     torch.testing.assert_close(predicted, expected, rtol=1e-2, atol=1e-2)
 
 
-@pytest.mark.parametrize("disjoint", DISJOINT)
+@pytest.mark.parametrize("reads", READS)
 @pytest.mark.parametrize("blend", BLENDS)
 @pytest.mark.parametrize("correction", CORRECTIONS)
-def test_a_monotone_union_is_never_above_either_part_whatever_its_weights(correction, blend, disjoint):
+def test_a_monotone_union_is_never_above_either_part_whatever_its_weights(correction, blend, reads):
     """λᵢ(A ∪ B) ≤ min(λᵢ(A), λᵢ(B)) by construction: random weights, random operands."""
     for seed in range(3):
-        model = operator(correction, seed, blend=blend, disjoint=disjoint)
+        model = operator(correction, seed, blend=blend, reads=reads)
         for name, parameter in model.correction.named_parameters():
             if "weight" in name and parameter.dim() > 1:
                 torch.nn.init.normal_(parameter, std=0.5)
         a, b = spectra(64, 10 + seed), spectra(64, 20 + seed) * (0.2 + seed)
         with torch.no_grad():
-            union, _ = model(a, b)
+            union, _ = model(a, b, None, told(model, 64, seed))
         assert (union <= torch.minimum(a, b) * (1 + 1e-5)).all()
 
 
-@pytest.mark.parametrize("disjoint", DISJOINT)
+@pytest.mark.parametrize("reads", READS)
 @pytest.mark.parametrize("blend", BLENDS)
 @pytest.mark.parametrize("correction", CORRECTIONS)
-def test_a_part_united_with_itself_is_itself_whatever_its_weights(correction, blend, disjoint):
+def test_a_part_united_with_itself_is_itself_whatever_its_weights(correction, blend, reads):
     """Idempotence by construction: the coincidence gate is exactly 0 for one spectrum twice,
     so U(A, A) = A with random weights and a memory that knows nothing of A; two different
     parts get the full decrease the network proposes, and a pair 1 % apart stays below both."""
     a = spectra(64, 30)
     for seed in range(3):
-        model = operator(correction, seed, blend=blend, disjoint=disjoint)
+        model = operator(correction, seed, blend=blend, reads=reads)
         for name, parameter in model.correction.named_parameters():
             if "weight" in name and parameter.dim() > 1:
                 torch.nn.init.normal_(parameter, std=0.5)
+        overlap = told(model, 64, seed)
         with torch.no_grad():
-            union, _ = model(a, a)
-            near = model(a, a * (1 + 0.01 * torch.randn(a.shape, generator=torch.Generator().manual_seed(seed))))
+            union, _ = model(a, a, None, overlap)
+            jittered = a * (1 + 0.01 * torch.randn(a.shape, generator=torch.Generator().manual_seed(seed)))
+            near = model(a, jittered, None, overlap)
             scale = common_scale(a, a)
             za = relative_log(a, scale)
             gates = model.coincidence(za, za), model.coincidence(za, relative_log(spectra(64, 31), scale))
@@ -178,33 +200,35 @@ def test_a_part_united_with_itself_is_itself_whatever_its_weights(correction, bl
         assert (near[0] <= torch.minimum(a, a) * (1 + 1e-5)).all()
 
 
-@pytest.mark.parametrize("disjoint", DISJOINT)
+@pytest.mark.parametrize("reads", READS)
 @pytest.mark.parametrize("blend", BLENDS)
 @pytest.mark.parametrize("parametrization", PARAMETRIZATIONS)
 @pytest.mark.parametrize("correction", CORRECTIONS)
-def test_union_is_exactly_commutative_and_non_decreasing(correction, parametrization, blend, disjoint):
-    model = operator(correction, parametrization=parametrization, blend=blend, disjoint=disjoint)
+def test_union_is_exactly_commutative_and_non_decreasing(correction, parametrization, blend, reads):
+    model = operator(correction, parametrization=parametrization, blend=blend, reads=reads)
     a, b = spectra(64, 1), spectra(64, 2)
+    overlap = told(model, 64, 5)
     with torch.no_grad():
-        ab, sigma_ab = model(a, b)
-        ba, sigma_ba = model(b, a)
+        ab, sigma_ab = model(a, b, None, overlap)
+        ba, sigma_ba = model(b, a, None, overlap)
     assert torch.equal(ab, ba) and torch.equal(sigma_ab, sigma_ba)
     assert (torch.diff(ab, dim=1) >= 0).all() and (ab >= 0).all() and (sigma_ab > 0).all()
 
 
-@pytest.mark.parametrize("disjoint", DISJOINT)
+@pytest.mark.parametrize("reads", READS)
 @pytest.mark.parametrize("blend", BLENDS)
 @pytest.mark.parametrize("correction", CORRECTIONS)
 @pytest.mark.parametrize("factor", [0.01, 0.25, 3.0, 1e4])
-def test_union_is_scale_equivariant(factor, correction, blend, disjoint):
+def test_union_is_scale_equivariant(factor, correction, blend, reads):
     """A body scaled by s has every eigenvalue scaled by 1/s², its unions' included. Up to float32
     rounding, relative to each value, and, for a union eigenvalue random weights push near zero,
     to the cancellation in exp(z) − ε: a few float32 ulps of ε in the common scale."""
-    model = operator(correction, blend=blend, disjoint=disjoint)
+    model = operator(correction, blend=blend, reads=reads)
     a, b = spectra(16, 3), spectra(16, 4)
+    overlap = told(model, 16, 6)
     with torch.no_grad():
-        union, sigma = model(a, b)
-        scaled_union, scaled_sigma = model(a * factor, b * factor)
+        union, sigma = model(a, b, None, overlap)
+        scaled_union, scaled_sigma = model(a * factor, b * factor, None, overlap)
     cancellation = 1e-6 * EPSILON * float(common_scale(a, b).max()) * factor
     torch.testing.assert_close(scaled_union, union * factor, rtol=1e-5, atol=cancellation)
     torch.testing.assert_close(scaled_sigma, sigma * factor, rtol=1e-5, atol=0)
@@ -221,6 +245,45 @@ def test_union_keeps_the_relative_size_of_the_parts(correction):
         bigger_b = model(a, b / 3)[0]
     ratio = bigger_b / union
     assert not torch.allclose(ratio, ratio[:, :1].expand_as(ratio), rtol=1e-3)
+
+
+@pytest.mark.parametrize("correction", CORRECTIONS)
+def test_a_told_overlap_reaches_the_union_and_an_unknown_one_is_not_told(correction):
+    """An operator that reads the overlap answers differently for different told shares; told
+    "unknown" (any negative value) it answers as when told nothing, without the σ factor for told
+    pairs; and an operator that does not read it ignores it."""
+    model = operator(correction, reads="told")
+    a, b = spectra(16, 7), spectra(16, 8)
+    with torch.no_grad():
+        nothing = model(a, b)
+        unknown = model(a, b, None, torch.full((16, 1), -0.5))
+        nested, apart = (model(a, b, None, torch.full((16, 1), share))[0] for share in (1.0, 0.0))
+        plain = operator(correction, reads="disjoint")
+        ignored = plain(a, b, None, torch.full((16, 1), 0.3))
+    assert torch.equal(nothing[0], unknown[0]) and torch.equal(nothing[1], unknown[1])
+    assert (nested - apart).abs().max() > 1e-3 * apart.abs().max()
+    assert torch.equal(ignored[0], plain(a, b)[0]) and torch.equal(ignored[1], plain(a, b)[1])
+
+
+def test_sigma_of_a_pair_told_its_overlap_takes_the_told_factor_above_its_floor():
+    """σ's factor for told pairs (fitted by train_union.calibrate_told) scales σ above its floor
+    where the overlap is told, and there only; the floor (what meshing alone moves a spectrum by)
+    stays whole."""
+    model = operator("transformer", reads="told")
+    a, b = spectra(16, 9), spectra(16, 10)
+    overlap = told_overlaps(16, 3)
+    with torch.no_grad():
+        answers = {}
+        for factor in (1.0, 0.25, 0.0):
+            model.set_sigma_told(factor)
+            answers[factor] = model(a, b, None, overlap)
+    known = overlap[:, 0] >= 0
+    union, sigma = answers[1.0]
+    floor = answers[0.0][1]
+    assert torch.equal(union, answers[0.25][0])
+    torch.testing.assert_close(answers[0.25][1][known], floor[known] + 0.25 * (sigma[known] - floor[known]))
+    torch.testing.assert_close(floor[known], model.sigma_floor * (union[known] + EPSILON * common_scale(a, b)[known]))
+    assert torch.equal(answers[0.25][1][~known], sigma[~known])
 
 
 def test_localizer_basis_head_is_small_and_maps_to_vertices():

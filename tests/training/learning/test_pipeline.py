@@ -14,6 +14,7 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("onnxscript")
 
+from app.contract import UNKNOWN_OVERLAP, union_feeds  # noqa: E402
 from tests.training.data.synthetic import SyntheticSource  # noqa: E402
 from training.data.build import build_dataset  # noqa: E402
 from training.data.presets import PRESETS  # noqa: E402
@@ -76,9 +77,9 @@ def test_training_hides_each_row_s_union_kin_from_its_memory(trained, tmp_path, 
     seen = []
     losses = union_training._losses
 
-    def spy(model, pairs, hidden, chains, loss):
+    def spy(model, pairs, hidden, chains, loss, overlap=None):
         seen.append(hidden.cpu().numpy())
-        return losses(model, pairs, hidden, chains, loss)
+        return losses(model, pairs, hidden, chains, loss, overlap)
 
     monkeypatch.setattr(union_training, "_losses", spy)
     settings = replace(TRAINING_PRESETS["tiny"].union, epochs=1, hide_union_type=1.0)
@@ -88,6 +89,30 @@ def test_training_hides_each_row_s_union_kin_from_its_memory(trained, tmp_path, 
     assert all((expected == row).all(axis=1).any() for row in hidden)
     same_body_only = bodies[:, None] == bodies[None, :]
     assert any(not (same_body_only == row).all(axis=1).any() for row in hidden)  # kin beyond the body
+
+
+def test_overlap_shares_are_whole_for_a_part_with_itself_or_inside_the_body_and_told_noisily(trained):
+    """The share of the smaller part inside the other: 1 for a part with itself and for any part
+    with the whole body (mask 0), between 0 and 1 for every pair; what training tells a batch
+    (train_union._told) is that share within a few noise widths, or unknown, in about the
+    preset's proportions."""
+    root, _ = trained
+    data = SpectralData(root / "data")
+    pairs = data.pairs
+    shares = data.overlap_shares(pairs.mask_a, pairs.mask_b)
+    itself = pairs.mask_a == pairs.mask_b
+    with_body = (pairs.mask_a == 0) | (pairs.mask_b == 0)
+    assert itself.any() and with_body.any() and not (itself | with_body).all()
+    np.testing.assert_allclose(shares[itself | with_body], 1.0, rtol=1e-12)
+    assert ((shares >= 0) & (shares <= 1 + 1e-12)).all() and (shares < 0.9).any()
+    settings = TRAINING_PRESETS["standard"].union
+    many = torch.as_tensor(np.resize(shares, 20_000), dtype=torch.float32)
+    told = union_training._told(many, settings, torch.Generator().manual_seed(0))[:, 0]
+    known = told >= 0
+    assert (told[~known] == UNKNOWN_OVERLAP).all()
+    assert abs(known.float().mean().item() - settings.overlap_told) < 0.02
+    assert ((told[known] - many[known]).abs() <= 5 * settings.overlap_noise).all()
+    assert ((told[known] >= 0) & (told[known] <= 1)).all()
 
 
 def test_onnx_matches_pytorch(trained):
@@ -102,13 +127,15 @@ def test_exported_union_commutes_is_non_decreasing_and_below_both_parts(trained)
     data = np.load(root / "data" / "dataset.npz")
     a = data["spectra"][data["spec_a"]].astype(np.float32)
     b = data["spectra"][data["spec_b"]].astype(np.float32)
-    ab, sigma = union.run(None, {"spectrum_a": a, "spectrum_b": b})
-    ba, _ = union.run(None, {"spectrum_a": b, "spectrum_b": a})
+    overlap = SpectralData(root / "data").overlap_shares(data["mask_a"], data["mask_b"])
+    overlap[::3] = UNKNOWN_OVERLAP
+    ab, sigma = union.run(None, union_feeds(a, b, overlap))
+    ba, _ = union.run(None, union_feeds(b, a, overlap))
     assert np.max(np.abs(ab - ba)) <= 1e-6
     assert (np.diff(ab, axis=1) >= 0).all() and (sigma > 0).all()
     # A closed body's λ₁ is a numerical zero, sometimes −1e-13: the union's is clipped to 0.
     assert (ab <= np.maximum(np.minimum(a, b), 0) * (1 + 1e-6)).all()
-    scaled, _ = union.run(None, {"spectrum_a": 4 * a, "spectrum_b": 4 * b})
+    scaled, _ = union.run(None, union_feeds(4 * a, 4 * b, overlap))
     np.testing.assert_allclose(scaled, 4 * ab, rtol=1e-5)
 
 
