@@ -362,9 +362,10 @@ def evaluate(
                     rows[f"{split}/{group}/{variant}"] = evaluator.row(pairs.rows(np.flatnonzero(selection)))
     test_c = pairs.rows(np.flatnonzero(pairs.split == "test_c"))
     overlapping_a = pairs.rows(np.flatnonzero((pairs.split == "test_a") & ~random_pairs))
-    test_b = pairs.rows(np.flatnonzero((pairs.split == "test_b") & (pairs.variant != CLOUD)))
     told = evaluator.told_rows(test_c, evaluator.strata(test_c), "test_c")
-    told |= evaluator.told_rows(test_b, test_b.group, "test_b")
+    for split in SPLITS:  # the paper's rows, told: Test A and Test B by group
+        chosen = pairs.rows(np.flatnonzero((pairs.split == split) & random_pairs & (pairs.variant != CLOUD)))
+        told |= evaluator.told_rows(chosen, chosen.group, split)
     return {
         "rows": rows,
         **({"overlap_told": told} if told else {}),
