@@ -100,6 +100,10 @@ def main() -> None:
             f"curl -s -F \"spectra=$(cat spectra.json)\" '{url}/v1/union?overlap={share}'",
             client.post("/v1/union", params={"overlap": share}, data={"spectra": spectra}),
         )
+        show(
+            f"curl -s {both} '{url}/v1/union?measure_overlap=true'",
+            client.post("/v1/union", params={"measure_overlap": "true"}, files=files(folder)),
+        )
         localized = client.post("/v1/localize", files=files(folder)).json()
         recorded["localize"] = rounded({**localized, "vertices": localized["vertices"][:5]})
         region = {k: localized[k] for k in ("vertices", "area_fraction", "part_coverage", "template_vertices")}

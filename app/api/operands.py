@@ -20,7 +20,8 @@ from app.api.solver import SolverPool
 from app.core.config import Settings
 from app.core.errors import InputError
 from app.geometry.io import resolve_file_type
-from app.geometry.pipeline import SpectrumOptions, SpectrumReport
+from app.geometry.overlap import Footprint
+from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport
 from app.inference.models import InvalidOverlap
 from app.inference.spectra import InvalidSpectrum, checked_spectrum
 
@@ -52,6 +53,16 @@ OverlapQuery = Annotated[
 ]
 
 
+MeasureOverlapQuery = Annotated[
+    bool,
+    Query(
+        description="The uploaded files are views of one body in one coordinate frame and one pose (a scanner's "
+        "registered views): measure the overlap of each union step from them instead of being told it "
+        "(app.geometry.overlap). Every operand must be an uploaded file; not with overlap.",
+    ),
+]
+
+
 def parse_overlaps(text: str | None) -> list[float] | None:
     """The ``overlap`` query parameter as one share per union step (None: not told)."""
     if text is None:
@@ -67,6 +78,7 @@ class Operand:
     source: str  # "files[0] scan.ply" or "spectra[1]"
     eigenvalues: list[float]
     report: SpectrumReport | None  # what the solve found, for files
+    footprint: Footprint | None = None  # where an uploaded shape lies, when asked for
 
 
 def parse_spectra(text: str | None, k: int) -> list[list[float]]:
@@ -130,10 +142,11 @@ async def resolve_operands(
     units: Literal["m", "cm", "mm"],
     scale: float | None,
     check_count: Callable[[int], object] | None = None,
+    footprints: bool = False,
 ) -> tuple[list[Operand], float]:
     """Every operand's spectrum (at least one), and the milliseconds spent solving uploaded files.
     ``check_count`` sees how many operands there are before any upload is solved (a mismatch
-    it raises costs no solve)."""
+    it raises costs no solve); with ``footprints`` each uploaded file's operand says where it lies."""
     given = parse_spectra(spectra, k)
     files = files or []
     count = len(files) + len(given)
@@ -151,28 +164,34 @@ async def resolve_operands(
     options = upload_options(settings, k, units, scale)
     sources = [f"files[{index}] {upload.filename or ''}".strip() for index, upload in enumerate(files)]
     started = time.perf_counter()
-    reports = await _solve_all(request, files, options)
+    outcomes = await _solve_all(request, files, options, footprints)
     solve_ms = (time.perf_counter() - started) * 1e3
-    for source, report in zip(sources, reports, strict=True):
-        if isinstance(report, InputError):
-            report.args = (f"{source}: {report}",)
-        if isinstance(report, BaseException):
-            raise report  # the first failing file, in upload order
-    operands = [Operand(source, report.eigenvalues, report) for source, report in zip(sources, reports, strict=True)]
+    for source, outcome in zip(sources, outcomes, strict=True):
+        if isinstance(outcome, InputError):
+            outcome.args = (f"{source}: {outcome}",)
+        if isinstance(outcome, BaseException):
+            raise outcome  # the first failing file, in upload order
+    operands = [
+        Operand(source, solved.report.eigenvalues, solved.report, solved.footprint)
+        for source, solved in zip(sources, outcomes, strict=True)
+    ]
     operands += [Operand(f"spectra[{i}]", values, None) for i, values in enumerate(given)]
     return operands, solve_ms
 
 
 async def _solve_all(
-    request: Request, files: list[UploadFile], options: SpectrumOptions
-) -> list[SpectrumReport | BaseException]:
+    request: Request, files: list[UploadFile], options: SpectrumOptions, footprints: bool
+) -> list[Solved | BaseException]:
     """Every file solved at once on the solver pool (a union of two scans costs one solve's
     latency, not two), each outcome in upload order: a report, or the exception it raised.
     Every solve runs to its end (each is bounded by the pool's deadline and caps), so a failure
     is reported for the first failing file whatever order the workers finish in."""
 
-    async def solve(upload: UploadFile) -> SpectrumReport:
+    solver: SolverPool = request.app.state.solver
+
+    async def solve(upload: UploadFile) -> Solved:
         data = await upload.read()
-        return await solve_upload(request, data, resolve_file_type(upload.filename, None), options)
+        file_type = resolve_file_type(upload.filename, None)
+        return await solver.solve_with_functions(data, file_type, options, vectors=False, footprint=footprints)
 
     return list(await asyncio.gather(*(solve(upload) for upload in files), return_exceptions=True))

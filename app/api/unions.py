@@ -14,8 +14,9 @@ from fastapi import Request, UploadFile
 from app.api.metrics import INFERENCE
 from app.api.operands import Operand, parse_overlaps, resolve_operands
 from app.core.config import Settings
+from app.geometry.overlap import measured_overlaps
 from app.geometry.plausibility import size_warnings
-from app.inference.models import SpectralModels, UnionEstimate, checked_overlaps
+from app.inference.models import InvalidOverlap, SpectralModels, UnionEstimate, checked_overlaps
 
 
 @dataclass(frozen=True)
@@ -27,6 +28,7 @@ class UnionOutcome:
     solve_ms: float
     inference_ms: float
     warnings: list[str]
+    overlaps: list[float]  # each union step's overlap as told or measured; empty when neither
 
     def fields(self, models: SpectralModels) -> dict:
         """The response fields every union-based endpoint shares."""
@@ -40,6 +42,7 @@ class UnionOutcome:
             "solve_ms": round(self.solve_ms, 2),
             "inference_ms": round(self.inference_ms, 2),
             "warnings": self.warnings,
+            "overlaps": self.overlaps,
         }
 
 
@@ -52,17 +55,23 @@ async def union_of_operands(
     units: Literal["m", "cm", "mm"],
     scale: float | None,
     overlap: str | None = None,
+    measure_overlap: bool = False,
 ) -> UnionOutcome:
     """Resolve the operands (solving uploaded files) and fold them through the union operator,
-    told the overlap of each step where the client knows it."""
+    told the overlap of each step where the client knows it, or measured from the uploads
+    (``measure_overlap``: views in one frame and pose)."""
     overlaps = parse_overlaps(overlap)
+    if measure_overlap:
+        _check_measurable(overlaps, spectra, models)
 
     def check_overlaps(count: int) -> list[float]:
         return checked_overlaps(overlaps, count, models.reads_overlap)
 
     operands, solve_ms = await resolve_operands(
-        request, settings, files, spectra, models.k, units, scale, check_count=check_overlaps
+        request, settings, files, spectra, models.k, units, scale, check_overlaps, footprints=measure_overlap
     )
+    if measure_overlap:
+        overlaps = measured_overlaps([o.footprint for o in operands if o.footprint is not None])
     started = time.perf_counter()
     values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
     result = await anyio.to_thread.run_sync(models.union, values, overlaps)
@@ -70,4 +79,15 @@ async def union_of_operands(
     INFERENCE.labels("union").observe(seconds)
     warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]
     warnings += size_warnings(values, [o.source for o in operands])
-    return UnionOutcome(operands, result, solve_ms, seconds * 1e3, warnings)
+    return UnionOutcome(operands, result, solve_ms, seconds * 1e3, warnings, overlaps or [])
+
+
+def _check_measurable(told: list[float] | None, spectra: str | None, models: SpectralModels) -> None:
+    """Before anything is solved: a measured overlap needs every operand uploaded (a spectrum has
+    no geometry), no told one beside it, and models that read it."""
+    if told is not None:
+        raise InvalidOverlap("give overlap or measure_overlap, not both")
+    if spectra is not None and spectra.strip():
+        raise InvalidOverlap("measure_overlap measures uploaded files; spectra operands have no geometry to measure")
+    if not models.reads_overlap:
+        raise InvalidOverlap("the served union operator does not read overlaps; send the request without them")

@@ -13,6 +13,7 @@ from app.contract import MAX_HOLE_EDGES
 from app.geometry.errors import InvalidGeometry
 from app.geometry.io import load_shape, unit_scale
 from app.geometry.laplacian import Operators, mesh_operators, point_cloud_operators
+from app.geometry.overlap import Footprint, footprint_of
 from app.geometry.plausibility import area_warnings
 from app.geometry.shapes import Mesh, PointCloud
 from app.geometry.spectrum import DEFAULT_K, eigenpairs
@@ -72,6 +73,7 @@ class Solved:
     report: SpectrumReport
     functions: np.ndarray | None  # (vertices, k), M-orthonormal, 0 on Dirichlet boundary vertices
     sources: np.ndarray  # (vertices,): index in the uploaded vertex list, -1 for a pin-hole's centre
+    footprint: Footprint | None = None  # with ``footprint``: where the shape lies, to measure overlaps by
 
     def npz(self) -> bytes:
         """The eigenfunctions as the API and the CLI hand them out: an ``.npz`` of NPY arrays
@@ -88,9 +90,11 @@ class Solved:
         return buffer.getvalue()
 
 
-def solve_bytes(data: bytes, file_type: str, options: SpectrumOptions, *, vectors: bool) -> Solved:
+def solve_bytes(
+    data: bytes, file_type: str, options: SpectrumOptions, *, vectors: bool, footprint: bool = False
+) -> Solved:
     """Parse, validate and solve, with or without the eigenfunctions (whose size, vertices × k,
-    is bounded by MAX_FUNCTION_VALUES: the answer is as large as that)."""
+    is bounded by MAX_FUNCTION_VALUES: the answer is as large as that) and the footprint."""
     scale = unit_scale(options.units, options.scale)
     shape = load_shape(data, file_type, scale=scale, max_vertices=options.max_vertices)
     count = len(shape.vertices) if isinstance(shape, Mesh) else len(shape.points)
@@ -100,8 +104,8 @@ def solve_bytes(data: bytes, file_type: str, options: SpectrumOptions, *, vector
             "(40 MB): ask for fewer eigenvalues"
         )
     if isinstance(shape, Mesh):
-        return _solve_mesh(shape, options, scale, vectors)
-    return _solve_cloud(shape, options, scale, vectors)
+        return _solve_mesh(shape, options, scale, vectors, footprint)
+    return _solve_cloud(shape, options, scale, vectors, footprint)
 
 
 def mesh_spectrum(mesh: Mesh, options: SpectrumOptions, scale: float = 1.0) -> SpectrumReport:
@@ -114,7 +118,7 @@ def cloud_spectrum(cloud: PointCloud, options: SpectrumOptions, scale: float = 1
     return _solve_cloud(cloud, options, scale, vectors=False).report
 
 
-def _solve_mesh(mesh: Mesh, options: SpectrumOptions, scale: float, vectors: bool) -> Solved:
+def _solve_mesh(mesh: Mesh, options: SpectrumOptions, scale: float, vectors: bool, footprint: bool = False) -> Solved:
     prepared = prepare_mesh(mesh, k=options.k, max_hole_edges=options.max_hole_edges)
     started = time.perf_counter()
     operators = mesh_operators(prepared.mesh.vertices, prepared.mesh.faces)
@@ -131,10 +135,13 @@ def _solve_mesh(mesh: Mesh, options: SpectrumOptions, scale: float, vectors: boo
         components_dropped=prepared.components_dropped,
         holes_filled=prepared.holes_filled,
         scale=scale,
+        points=prepared.mesh.vertices if footprint else None,
     )
 
 
-def _solve_cloud(cloud: PointCloud, options: SpectrumOptions, scale: float, vectors: bool) -> Solved:
+def _solve_cloud(
+    cloud: PointCloud, options: SpectrumOptions, scale: float, vectors: bool, footprint: bool = False
+) -> Solved:
     prepared = prepare_cloud(cloud, k=options.k, closed=options.closed, boundary_indices=options.boundary_indices)
     started = time.perf_counter()
     operators = point_cloud_operators(prepared.cloud.points)
@@ -150,6 +157,7 @@ def _solve_cloud(cloud: PointCloud, options: SpectrumOptions, scale: float, vect
         components_dropped=prepared.components_dropped,
         holes_filled=0,
         scale=scale,
+        points=prepared.cloud.points if footprint else None,
     )
 
 
@@ -166,6 +174,7 @@ def _solve(
     components_dropped: int,
     holes_filled: int,
     scale: float,
+    points: np.ndarray | None = None,
 ) -> Solved:
     assembled = time.perf_counter()
     values, free_functions = eigenpairs(operators, k, fixed, vectors=vectors)
@@ -191,4 +200,5 @@ def _solve(
     if free_functions is not None:
         functions = np.zeros((n, k))
         functions[slice(None) if fixed is None else ~fixed] = free_functions
-    return Solved(report, functions, sources)
+    shape = None if points is None else footprint_of(points, operators.mass.diagonal())
+    return Solved(report, functions, sources, shape)

@@ -131,7 +131,7 @@ class MeetingSolver:
     def __init__(self, real, expected: int) -> None:
         self.real, self.expected, self.in_flight, self.peak = real, expected, 0, 0
 
-    async def solve(self, data, file_type, options):
+    async def solve_with_functions(self, data, file_type, options, **flags):
         import asyncio
 
         self.in_flight += 1
@@ -140,7 +140,7 @@ class MeetingSolver:
             async with asyncio.timeout(60):  # a deadlock guard, not a measured time
                 while self.peak < self.expected:
                     await asyncio.sleep(0.01)
-            return await self.real.solve(data, file_type, options)
+            return await self.real.solve_with_functions(data, file_type, options, **flags)
         finally:
             self.in_flight -= 1
 

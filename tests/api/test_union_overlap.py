@@ -8,6 +8,8 @@ from prometheus_client import REGISTRY
 
 from app.contract import UNKNOWN_OVERLAP
 from app.inference.models import InvalidOverlap, checked_overlaps
+from app.samples import PARTS as SAMPLE_PARTS
+from app.samples import sample_overlap, template_part
 from tests.api.test_union_api import LEGS, PROBLEM, ply_bytes, region, spectrum, template  # noqa: F401 (fixture)
 
 LEFT_ARM = ("left_upper_arm", "left_forearm", "left_hand")
@@ -114,3 +116,37 @@ def test_told_that_one_part_is_inside_the_other_the_union_is_the_larger_part(cli
         return float((np.abs(values - larger) / np.array(larger))[1:].mean())
 
     assert error(told) <= 0.03 and error(told) * 4 <= error(untold)
+
+
+def test_uploads_in_one_frame_have_their_overlap_measured(client, template):  # noqa: F811
+    """The README's two sample parts (the template less head and neck, less left forearm and hand):
+    the measured share is their true one from the template's faces, and the union is the one told
+    that share."""
+    files = [("files", (name, template_part(template, removed))) for name, removed in SAMPLE_PARTS.items()]
+    measured = client.post("/v1/union", params={"measure_overlap": "true"}, files=files)
+    assert measured.status_code == 200, measured.text
+    (share,) = measured.json()["overlaps"]
+    assert share == pytest.approx(sample_overlap(template), abs=0.02)
+    spectra = [operand["eigenvalues"] for operand in measured.json()["operands"]]
+    told = union(client, spectra, [share]).json()
+    np.testing.assert_allclose(measured.json()["eigenvalues"], told["eigenvalues"], rtol=1e-5)
+    assert told["overlaps"] == pytest.approx([share]) and union(client, spectra).json()["overlaps"] == []
+
+
+def test_a_part_inside_another_is_measured_whole(client, template):  # noqa: F811
+    parts = (LEGS, LEGS + LEFT_ARM)
+    files = [("files", (f"{i}.ply", ply_bytes(region(template, removed)))) for i, removed in enumerate(parts)]
+    response = client.post("/v1/union", params={"measure_overlap": "true"}, files=files)
+    assert response.json()["overlaps"] == pytest.approx([1.0], abs=0.01)
+
+
+@pytest.mark.parametrize("extra", [{"overlap": "0.5"}, {"spectra": "[[1,2,3]]"}], ids=["told too", "a spectrum"])
+def test_a_measured_overlap_needs_uploads_alone_and_is_refused_before_solving(client, template, extra):  # noqa: F811
+    upload = ply_bytes(region(template, LEGS))
+    files = [("files", ("a.ply", upload)), ("files", ("b.ply", upload))]
+    params = {"measure_overlap": "true", **{k: v for k, v in extra.items() if k == "overlap"}}
+    data = {k: v for k, v in extra.items() if k == "spectra"}
+    before = _solves()
+    response = client.post("/v1/union", params=params, data=data, files=files)
+    assert response.status_code == 422 and response.json()["type"] == "/problems/invalid-overlap"
+    assert _solves() == before

@@ -24,7 +24,7 @@ from pydantic import Field
 from app.api.deps import ModelsDep, SettingsDep
 from app.api.examples import success
 from app.api.metrics import INFERENCE
-from app.api.operands import FilesField, OverlapQuery, ScaleQuery, SpectraField, UnitsQuery
+from app.api.operands import FilesField, MeasureOverlapQuery, OverlapQuery, ScaleQuery, SpectraField, UnitsQuery
 from app.api.problems import ProblemError, problem_responses
 from app.api.routes.unions import UNION_PROBLEMS, UnionResponse
 from app.api.solver import SolverPool
@@ -81,6 +81,7 @@ async def reconstruct(
     units: UnitsQuery = "m",
     scale: ScaleQuery = None,
     overlap: OverlapQuery = None,
+    measure_overlap: MeasureOverlapQuery = False,
     format: Annotated[
         Literal["json", "ply"],
         Query(description="ply: the rebuilt body as a mesh (height, area and the spectrum gap in X- headers)."),
@@ -91,7 +92,7 @@ async def reconstruct(
         raise ProblemError(
             501, "reconstruction-unavailable", "Reconstruction unavailable", "these models have no shape decoder"
         )
-    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, overlap)
+    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, overlap, measure_overlap)
     started = time.perf_counter()
     vertices = await anyio.to_thread.run_sync(models.reconstruct, outcome.result.eigenvalues, outcome.result.sigma)
     INFERENCE.labels("decoder").observe(time.perf_counter() - started)

@@ -8,7 +8,7 @@ from pydantic import BaseModel, Field
 
 from app.api.deps import ModelsDep, SettingsDep, StoreDep
 from app.api.examples import success
-from app.api.operands import FilesField, OverlapQuery, ScaleQuery, SpectraField, UnitsQuery
+from app.api.operands import FilesField, MeasureOverlapQuery, OverlapQuery, ScaleQuery, SpectraField, UnitsQuery
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.api.unions import union_of_operands
 
@@ -46,10 +46,11 @@ async def retrieve(
     units: UnitsQuery = "m",
     scale: ScaleQuery = None,
     overlap: OverlapQuery = None,
+    measure_overlap: MeasureOverlapQuery = False,
     top: Annotated[int, Query(ge=1, le=MAX_TOP, description="Number of matches.")] = 10,
 ) -> RetrieveResponse:
     """The stored complete shapes nearest to the union of the operands."""
-    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, overlap)
+    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, overlap, measure_overlap)
     matches = await anyio.to_thread.run_sync(store.nearest, outcome.result.eigenvalues, top)
     return RetrieveResponse(
         query=outcome.result.eigenvalues.tolist(),

@@ -1,0 +1,49 @@
+"""Measured overlap of views in one frame, against rectangles whose shared area is known."""
+
+import numpy as np
+import pytest
+
+from app.geometry.laplacian import mesh_operators
+from app.geometry.overlap import Footprint, footprint_of, measured_overlaps
+from app.geometry.shapes import Mesh
+from tests.conftest import grid
+
+
+def view(width: float, height: float, cells_per_metre: int, shift: float = 0.0, lift: float = 0.0) -> Footprint:
+    """A flat rectangular view, [shift, shift + width] × [0, height] at z = lift, meshed at its own density."""
+    mesh = grid(width, height, int(width * cells_per_metre), int(height * cells_per_metre))
+    vertices = mesh.vertices + np.array([shift, 0.0, lift])
+    return footprint_of(vertices, mesh_operators(vertices, mesh.faces).mass.diagonal())
+
+
+@pytest.mark.parametrize("densities", [(40, 40), (40, 57), (90, 33)])
+def test_two_views_sharing_half_their_area_measure_a_half(densities):
+    """Two 2 × 1 m views sharing 1 × 1 m, meshed alike or not: the smaller (either) is half inside."""
+    first, second = view(2, 1, densities[0]), view(2, 1, densities[1], shift=1.0)
+    (share,) = measured_overlaps([first, second])
+    assert share == pytest.approx(0.5, abs=0.03)
+    assert measured_overlaps([second, first]) == pytest.approx([share], abs=0.01)
+
+
+def test_a_view_inside_another_is_whole_and_views_apart_share_nothing():
+    large, inside = view(3, 1, 40), view(1, 0.6, 63, shift=1.0)
+    assert measured_overlaps([large, inside]) == pytest.approx([1.0], abs=0.02)
+    assert measured_overlaps([large, view(1, 1, 40, shift=3.5)]) == [0.0]
+    assert measured_overlaps([large, view(3, 1, 40, lift=0.05)]) == [0.0]  # 5 cm off the surface
+
+
+def test_a_chain_measures_each_view_against_the_union_so_far():
+    """[0, 2], then [1, 3]: half; then [2.5, 3.5] against their union [0, 3] (3 m²): half of the
+    1 m² view lies inside; the union so far counts the shared metre once."""
+    views = [view(2, 1, 40), view(2, 1, 47, shift=1.0), view(1, 1, 40, shift=2.5)]
+    assert measured_overlaps(views) == pytest.approx([0.5, 0.5], abs=0.03)
+
+
+def test_a_large_view_is_subsampled_to_the_same_area():
+    mesh: Mesh = grid(2, 1, 400, 200)
+    areas = mesh_operators(mesh.vertices, mesh.faces).mass.diagonal()
+    whole, kept = footprint_of(mesh.vertices, areas), footprint_of(mesh.vertices, areas, limit=5_000)
+    assert len(mesh.vertices) > 32_768 and len(whole.points) == 32_768 and whole.area == pytest.approx(2.0, rel=1e-5)
+    assert len(kept.points) == 5_000 and kept.area == pytest.approx(2.0, rel=1e-5)
+    (share,) = measured_overlaps([kept, view(2, 1, 40, shift=1.0)])
+    assert share == pytest.approx(0.5, abs=0.03)
