@@ -1,0 +1,86 @@
+"""How well the service measures two views' overlap, and what the union gains from it.
+
+    python benchmarks/measured_overlap.py [--data data/standard] [--models models] [--rows 400]
+
+Test C's camera-view pairs whose two views are in one pose (the same posed body, as a scanner's
+registered views are): each view's part mesh is rebuilt in that pose (re-meshed for the
+re-meshed rows, as the data build does), its overlap measured as ``measure_overlap`` does
+(:mod:`app.geometry.overlap`), and set against the share from the template's areas. Then the
+served union operator's mean relative error untold, told the true share, and told the measured
+one. Needs the data set's ``work/shapes.npy`` (the posed bodies); a random subset of ``--rows``.
+"""
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from app.geometry.laplacian import mesh_operators
+from app.geometry.overlap import Footprint, footprint_of, measured_overlaps
+from training.data.spectra import MESH, REMESHED, region_mesh, remeshed
+from training.learning.data import SpectralData
+from training.learning.evaluate import served_predictors, served_told_predictor
+from training.learning.spectral_errors import spectral_errors
+
+
+def footprint(vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray, variant: str) -> Footprint:
+    """A view as the service would see it uploaded: its part mesh in the posed body's frame."""
+    mesh = region_mesh(vertices, faces, mask)
+    if variant == REMESHED:
+        mesh = remeshed(mesh)
+    return footprint_of(mesh.vertices, mesh_operators(mesh.vertices, mesh.faces).mass.diagonal())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=Path("data/standard"))
+    parser.add_argument("--models", type=Path, default=Path("models"))
+    parser.add_argument("--rows", type=int, default=400)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    data = SpectralData(args.data)
+    pairs = data.pairs
+    one_pose = np.flatnonzero((pairs.split == "test_c") & (pairs.shape_a == pairs.shape_b))
+    chosen = np.sort(np.random.default_rng(args.seed).choice(one_pose, min(args.rows, len(one_pose)), replace=False))
+    rows = pairs.rows(chosen)
+    bodies = np.load(args.data / "work" / "shapes.npy", mmap_mode="r")
+    faces = data.template.faces
+    true = data.overlap_shares(rows.mask_a, rows.mask_b)
+    measured = np.array(
+        [
+            measured_overlaps(
+                [
+                    footprint(np.asarray(bodies[shape], dtype=np.float64), faces, data.masks(np.array([m]))[0], v)
+                    for m in (mask_a, mask_b)
+                ]
+            )[0]
+            for shape, mask_a, mask_b, v in zip(rows.shape_a, rows.mask_a, rows.mask_b, rows.variant, strict=True)
+        ]
+    )
+    union, _ = served_predictors(args.models)
+    told = served_told_predictor(args.models)
+    if told is None:
+        raise SystemExit(f"{args.models} has a union operator that does not read the overlap")
+    answers = {
+        "untold": union(rows.a, rows.b)[0],
+        "told the true share": told(rows.a, rows.b, true)[0],
+        "told the measured share": told(rows.a, rows.b, measured)[0],
+    }
+    print("| kind / variant | n | share measured − true: mean abs / p95 / bias | " + " | ".join(answers) + " mre |")
+    print("|---" * (3 + len(answers)) + "|")
+    for variant in (MESH, REMESHED):
+        for kind in (None, *np.unique(rows.scenario)):
+            selected = (rows.variant == variant) & ((rows.scenario == kind) if kind else True)
+            if not selected.any():
+                continue
+            gap = measured[selected] - true[selected]
+            truth = rows.union[selected]
+            cells = " | ".join(f"{100 * spectral_errors(p[selected], truth)['mre']:.1f} %" for p in answers.values())
+            print(
+                f"| {kind or 'all'} / {variant} | {selected.sum()} | {np.abs(gap).mean():.3f} / "
+                f"{np.quantile(np.abs(gap), 0.95):.3f} / {gap.mean():+.3f} | {cells} |"
+            )
+
+
+if __name__ == "__main__":
+    main()
