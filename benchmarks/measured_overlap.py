@@ -66,7 +66,8 @@ def main() -> None:
         "told the true share": told(rows.a, rows.b, true)[0],
         "told the measured share": told(rows.a, rows.b, measured)[0],
     }
-    print("| kind / variant | n | share measured − true: mean abs / p95 / bias | " + " | ".join(answers) + " mre |")
+    columns = " | ".join(f"{name} mre" for name in answers)
+    print(f"| kind / variant | n | share measured − true: mean abs / p95 / bias | {columns} |")
     print("|---" * (3 + len(answers)) + "|")
     for variant in (MESH, REMESHED):
         for kind in (None, *np.unique(rows.scenario)):
