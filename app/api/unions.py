@@ -70,8 +70,9 @@ async def union_of_operands(
     operands, solve_ms = await resolve_operands(
         request, settings, files, spectra, models.k, units, scale, check_overlaps, footprints=measure_overlap
     )
-    if measure_overlap:
-        overlaps = measured_overlaps([o.footprint for o in operands if o.footprint is not None])
+    if measure_overlap:  # k-d trees of up to UNION_POINTS points per step: off the event loop
+        footprints = [o.footprint for o in operands if o.footprint is not None]
+        overlaps = await anyio.to_thread.run_sync(measured_overlaps, footprints)
     started = time.perf_counter()
     values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
     result = await anyio.to_thread.run_sync(models.union, values, overlaps)

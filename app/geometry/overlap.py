@@ -14,6 +14,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 FOOTPRINT_POINTS = 32_768  # vertices kept per view (a random subset beyond), ~0.5 MB
+UNION_POINTS = 4 * FOOTPRINT_POINTS  # the union so far of a chain is thinned to this many: bounded cost per step
 MIN_TOLERANCE_M = 0.003  # registration of one scanner's views is rarely better than a few mm
 
 
@@ -62,7 +63,6 @@ def measured_overlaps(views: list[Footprint]) -> list[float]:
         shared = (view.weights[of_next].sum() + so_far.weights[of_so_far].sum()) / 2
         shares.append(float(np.clip(shared / min(so_far.area, view.area), 0.0, 1.0)))
         added = ~of_next  # the next view's points outside the union so far join it
-        so_far = Footprint(
-            np.concatenate([so_far.points, view.points[added]]), np.concatenate([so_far.weights, view.weights[added]])
-        )
+        points = np.concatenate([so_far.points, view.points[added]])
+        so_far = footprint_of(points, np.concatenate([so_far.weights, view.weights[added]]), UNION_POINTS)
     return shares

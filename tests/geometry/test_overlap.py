@@ -47,3 +47,11 @@ def test_a_large_view_is_subsampled_to_the_same_area():
     assert len(kept.points) == 5_000 and kept.area == pytest.approx(2.0, rel=1e-5)
     (share,) = measured_overlaps([kept, view(2, 1, 40, shift=1.0)])
     assert share == pytest.approx(0.5, abs=0.03)
+
+
+def test_a_long_chain_of_dense_views_keeps_its_union_bounded_and_its_shares_right():
+    """Six 1 × 1 m views 0.5 m apart, each denser than a footprint keeps: every next view lies half
+    inside the union so far, which is thinned as it grows (the shares stay those of the areas)."""
+    views = [view(1, 1, 200, shift=0.5 * i) for i in range(6)]
+    assert all(len(v.points) == 32_768 for v in views)
+    assert measured_overlaps(views) == pytest.approx([0.5] * 5, abs=0.03)
