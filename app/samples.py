@@ -24,12 +24,15 @@ BODY_FILE, BODY_SCALE = "body.ply", 1.04  # a complete body of another size: an 
 SPECTRA_FILE = "spectra.json"
 
 
+def _kept_faces(template: Template, removed: tuple[str, ...]) -> np.ndarray:
+    """(faces,) which template faces remain when these body parts are removed."""
+    keep = ~np.isin(template.labels, [PART_NAMES.index(name) for name in removed])
+    return keep[template.faces].all(axis=1)
+
+
 def template_part(template: Template, removed: tuple[str, ...]) -> bytes:
     """The template body without some of its parts, as PLY bytes: a partial scan with a boundary."""
-    drop = [PART_NAMES.index(name) for name in removed]
-    keep = ~np.isin(template.labels, drop)
-    faces = template.faces[keep[template.faces].all(axis=1)]
-    mesh = trimesh.Trimesh(template.vertices, faces, process=False)
+    mesh = trimesh.Trimesh(template.vertices, template.faces[_kept_faces(template, removed)], process=False)
     mesh.remove_unreferenced_vertices()
     return mesh.export(file_type="ply")
 
@@ -38,8 +41,7 @@ def sample_overlap(template: Template) -> float:
     """The share of the smaller sample part's area inside the other (what ``overlap`` tells the
     union operator): both are the template less some parts, so it is exact from its faces."""
     face_area = trimesh.Trimesh(template.vertices, template.faces, process=False).area_faces
-    kept = [~np.isin(template.labels, [PART_NAMES.index(n) for n in removed]) for removed in PARTS.values()]
-    faces = [keep[template.faces].all(axis=1) for keep in kept]
+    faces = [_kept_faces(template, removed) for removed in PARTS.values()]
     both = face_area[faces[0] & faces[1]].sum()
     return float(both / min(face_area[f].sum() for f in faces))
 

@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 
-from app.contract import UNION_OVERLAP_INPUT, UNKNOWN_OVERLAP, union_feeds
+from app.contract import UNKNOWN_OVERLAP, union_feeds
+from app.inference.models import reads_overlap
 
 REPEATS = 50
 
@@ -44,14 +45,14 @@ def main() -> None:
     bodies = np.load(args.models / "shapes.npz")["spectra"].astype(np.float32)
     rng = np.random.default_rng(0)
     union, localizer = session(args.models / "union.onnx"), session(args.models / "localizer.onnx")
-    reads_overlap = UNION_OVERLAP_INPUT in {node.name for node in union.get_inputs()}
+    told_unknown = reads_overlap(union)
     for name in ("union.onnx", "localizer.onnx"):
         print(f"{name:16s} {(args.models / name).stat().st_size / 2**20:6.2f} MiB")
     for batch in (1, 256):
         rows = rng.integers(len(bodies), size=(2, batch))
         a = np.sort(bodies[rows[0]] * rng.uniform(1.2, 3.0, (batch, 1)), axis=1).astype(np.float32)
         b = np.sort(bodies[rows[1]] * rng.uniform(1.2, 3.0, (batch, 1)), axis=1).astype(np.float32)
-        told = np.full(batch, UNKNOWN_OVERLAP) if reads_overlap else None  # as the service feeds it, untold
+        told = np.full(batch, UNKNOWN_OVERLAP) if told_unknown else None  # as the service feeds it, untold
         feeds = union_feeds(a, b, told)
         union_ms = median_ms(lambda feeds=feeds: union.run(None, feeds))
         localizer_ms = median_ms(lambda a=a: localizer.run(None, {"spectrum": a}))

@@ -16,7 +16,13 @@ from app.api.operands import Operand, parse_overlaps, resolve_operands
 from app.core.config import Settings
 from app.geometry.overlap import measured_overlaps
 from app.geometry.plausibility import size_warnings
-from app.inference.models import InvalidOverlap, SpectralModels, UnionEstimate, checked_overlaps
+from app.inference.models import (
+    InvalidOverlap,
+    SpectralModels,
+    UnionEstimate,
+    checked_overlaps,
+    require_overlap_reader,
+)
 
 
 @dataclass(frozen=True)
@@ -90,5 +96,4 @@ def _check_measurable(told: list[float] | None, spectra: str | None, models: Spe
         raise InvalidOverlap("give overlap or measure_overlap, not both")
     if spectra is not None and spectra.strip():
         raise InvalidOverlap("measure_overlap measures uploaded files; spectra operands have no geometry to measure")
-    if not models.reads_overlap:
-        raise InvalidOverlap("the served union operator does not read overlaps; send the request without them")
+    require_overlap_reader(models.reads_overlap)

@@ -55,13 +55,23 @@ class InvalidOverlap(InputError):
     title = "Invalid overlap"
 
 
+def reads_overlap(union_graph: ort.InferenceSession) -> bool:
+    """Whether a union graph takes the overlap input (graphs exported before it do not)."""
+    return UNION_OVERLAP_INPUT in {node.name for node in union_graph.get_inputs()}
+
+
+def require_overlap_reader(readable: bool) -> None:
+    """An overlap, told or to be measured, is refused by models that cannot read it."""
+    if not readable:
+        raise InvalidOverlap("the served union operator does not read overlaps; send the request without them")
+
+
 def checked_overlaps(overlaps: list[float] | None, operands: int, readable: bool) -> list[float]:
     """One overlap per union step (``operands`` − 1 of them), each a share in 0 … 1; unknown for
     every step when none are given."""
     if overlaps is None:
         return [UNKNOWN_OVERLAP] * max(operands - 1, 0)
-    if not readable:
-        raise InvalidOverlap("the served union operator does not read overlaps; send the request without them")
+    require_overlap_reader(readable)
     if len(overlaps) != operands - 1:
         steps = operands - 1
         raise InvalidOverlap(f"{len(overlaps)} overlaps for {operands} operands: give one per union step ({steps})")
@@ -117,8 +127,7 @@ class SpectralModels:
         self.union_session = _session(directory / UNION_FILE, threads)
         self.localizer_session = _session(directory / LOCALIZER_FILE, threads)
         self.k = int(self.union_session.get_inputs()[0].shape[1])
-        # Graphs exported before the overlap input have none: they answer unions without it.
-        self.reads_overlap = UNION_OVERLAP_INPUT in {node.name for node in self.union_session.get_inputs()}
+        self.reads_overlap = reads_overlap(self.union_session)  # older graphs answer unions without it
         vertex_count = self.localizer_session.get_outputs()[0].shape[1]
         if vertex_count != len(self.template.vertices):
             raise ValueError(f"localizer predicts {vertex_count} vertices, template has {len(self.template.vertices)}")

@@ -19,11 +19,10 @@ from app.contract import (
     LOCALIZER_INPUTS,
     MASK_THRESHOLD,
     UNION_FILE,
-    UNION_OVERLAP_INPUT,
     UNKNOWN_OVERLAP,
     union_feeds,
 )
-from app.inference.models import chained_sigma
+from app.inference.models import chained_sigma, reads_overlap
 from training.data.overlaps import CAMERA
 from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION
 from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
@@ -119,13 +118,11 @@ def served_predictors(models: Path, batch: int = 1024) -> tuple[UnionPredictor, 
     model (this one or an earlier one) scores on a data set it was not evaluated on."""
     from training.learning.export import session
 
-    told = served_told_predictor(models, batch)
-    localizer_graph = session(models / LOCALIZER_FILE)
+    union_graph, localizer_graph = session(models / UNION_FILE), session(models / LOCALIZER_FILE)
+    unknown = reads_overlap(union_graph)  # a graph that reads the overlap is told none
 
     def union(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        if told is not None:  # a graph that reads the overlap, told none
-            return told(a, b, np.full(len(a), UNKNOWN_OVERLAP))
-        return _run_union(session(models / UNION_FILE), a, b, None, batch)
+        return _run_union(union_graph, a, b, np.full(len(a), UNKNOWN_OVERLAP) if unknown else None, batch)
 
     def region(spectra: np.ndarray) -> np.ndarray:
         (probability,) = localizer_graph.run(None, {LOCALIZER_INPUTS[0]: spectra.astype(np.float32)})
@@ -139,7 +136,7 @@ def served_told_predictor(models: Path, batch: int = 1024) -> ToldPredictor | No
     from training.learning.export import session
 
     graph = session(models / UNION_FILE)
-    if UNION_OVERLAP_INPUT not in {node.name for node in graph.get_inputs()}:
+    if not reads_overlap(graph):
         return None
     return lambda a, b, overlap: _run_union(graph, a, b, overlap, batch)
 

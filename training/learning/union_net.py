@@ -417,11 +417,10 @@ class UnionOperator(nn.Module):
         read = [priors, transferred]
         if self.config.disjoint_prior:
             read.append(relative_log(disjoint_union(a, b), scale)[:, None])
-        hint, told = overlap_rows(overlap, floor)
+        told = torch.zeros_like(floor[:, :1])  # a hint this operator cannot read is not told
         if self.config.overlap_hint:
+            hint, told = overlap_rows(overlap, floor)
             read.append(hint)
-        else:
-            told = torch.zeros_like(told)  # a hint this operator cannot read is not told
         change = self.correction(za, zb, torch.cat(read, dim=1), distances)
         gate = self.coincidence(za, zb)
         proposed = priors[:, 0] + change
