@@ -17,6 +17,9 @@ PARTIAL_UNION = "partial"
 OVERLAP = "overlap"  # two parts of one region, overlapping anywhere from a band to nesting
 AREA_TIE = 1e-3  # union areas closer than this fraction of the body are a tie
 MIN_GAIN = 0.02  # full and partial pairs: each part adds this much of the body to the other (overlap pairs nest)
+# A smaller part this much inside the other is nested in it: template masks of views are cut along
+# triangle edges, so a close-up a camera takes inside a far view may poke out by a face.
+NESTED_SHARE = 0.98
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from app.contract import (
 )
 from app.inference.models import chained_sigma, reads_overlap
 from training.data.overlaps import CAMERA
-from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION
+from training.data.pairs import FULL_COVERAGE, NESTED_SHARE, PARTIAL_UNION
 from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
 from training.learning.baselines import UnionLookup, disjoint_union, elementwise_min, larger_part
 from training.learning.data import PairTable, SpectralData
@@ -41,8 +41,6 @@ NOISE_FLOOR_REGIONS = 100
 # Overlap strata: how much of the smaller part lies inside the other. "identical" is one spectrum
 # twice (same region, body and meshing), "same_region" the region again in another pose or meshing.
 STRATA = ("identical", "same_region", "nested", "over_75", "25_to_75", "under_25")
-NESTED_SHARE = 0.98  # a smaller part this much inside the other is nested (template masks of views are
-# cut along triangle edges, so a close-up a camera takes inside a far view may poke out by a face)
 
 # The paper's figures (its Tables 1-3), keyed like our rows: (mse, mae) and (IoU %, accuracy %).
 PAPER_UNION = {

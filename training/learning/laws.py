@@ -15,12 +15,12 @@ import numpy as np
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.inference.models import SpectralModels
 from training.data.camera import body_mesh, close_up_camera, orbit_camera, view_mask
+from training.data.pairs import NESTED_SHARE
 from training.data.regions import RegionSampler
 from training.data.spectra import region_mesh, remeshed
 from training.learning.spectral_errors import spectral_errors
 
 SEED = 20_261_201  # no data set build draws from this stream
-NESTED_SHARE = 0.98  # a close-up this much inside its far view counts as inside it
 
 
 def relative_error(predicted: np.ndarray, truth: np.ndarray) -> float:
