@@ -7,6 +7,13 @@ report is the pipeline's dataclass, so the client cannot drift from what the ser
     with Client("http://127.0.0.1:8000") as client:
         part = client.spectrum("no_head_neck.ply")
         union = client.union(files=["no_left_forearm_hand.ply"], spectra=[part.eigenvalues])
+
+A scanner's registered views sent one by one keep their footprint tokens, and have each new
+view's overlap measured against the union so far, which the union routes are then told:
+
+        views = [client.spectrum(scan, footprint=True) for scan in scans]
+        measured = client.overlap([view.footprint for view in views])
+        union = client.union(spectra=[view.eigenvalues for view in views], overlap=measured.overlaps)
 """
 
 import json
@@ -20,9 +27,11 @@ import httpx
 from app.api.problems import PROBLEM_MEDIA_TYPE, Problem
 from app.api.routes.localize import LocalizeResponse
 from app.api.routes.models import ModelsResponse
+from app.api.routes.overlap import OverlapResponse
 from app.api.routes.reconstruct import ReconstructResponse
 from app.api.routes.retrieve import RetrieveResponse
 from app.api.routes.shapes import ShapeOut, ShapePage
+from app.api.routes.spectrum import FootprintedReport
 from app.api.routes.unions import UnionResponse
 from app.geometry.pipeline import SpectrumReport
 from app.geometry.spectrum import DEFAULT_K
@@ -87,12 +96,20 @@ class Client:
         scale: float | None = None,
         closed: bool = False,
         boundary: Sequence[int] | None = None,
-    ) -> SpectrumReport:
-        """The first ``k`` eigenvalues of one scan (Dirichlet where it has a boundary), in 1/m²."""
-        params = _params(k=k, units=units, scale=scale, closed=closed)
+        footprint: bool = False,
+    ) -> SpectrumReport | FootprintedReport:
+        """The first ``k`` eigenvalues of one scan (Dirichlet where it has a boundary), in 1/m²;
+        with ``footprint`` also its footprint token, for :meth:`overlap`."""
+        params = _params(k=k, units=units, scale=scale, closed=closed, footprint=footprint or None)
         data = {"boundary": json.dumps(list(boundary))} if boundary is not None else None
         body = self._post("/v1/spectrum", params, files=[("file", _part(scan))], data=data)
-        return SpectrumReport(**body)
+        return FootprintedReport(**body) if footprint else SpectrumReport(**body)
+
+    def overlap(self, footprints: Sequence[str]) -> OverlapResponse:
+        """Each union step's overlap of registered views, from their footprint tokens (the union
+        so far's ``union_footprint`` may stand for all the earlier ones)."""
+        field = [("footprints", (None, json.dumps(list(footprints))))]  # multipart: 1 MiB a field
+        return OverlapResponse(**self._post("/v1/overlap", {}, files=field, data=None))
 
     def union(
         self,
@@ -101,9 +118,13 @@ class Client:
         *,
         units: Units = "m",
         scale: float | None = None,
+        overlap: Sequence[float] | None = None,
+        measure_overlap: bool = False,
     ) -> UnionResponse:
-        """The union's spectrum and its 90 % interval; files first, then spectra, folded left to right."""
-        return UnionResponse(**self._operands("/v1/union", files, spectra, _params(units=units, scale=scale)))
+        """The union's spectrum and its 90 % interval; files first, then spectra, folded left to right;
+        ``overlap`` (one share per union step) where known, or ``measure_overlap`` for registered uploads."""
+        params = _union_params(units, scale, overlap, measure_overlap)
+        return UnionResponse(**self._operands("/v1/union", files, spectra, params))
 
     def localize(
         self,
@@ -112,9 +133,12 @@ class Client:
         *,
         units: Units = "m",
         scale: float | None = None,
+        overlap: Sequence[float] | None = None,
+        measure_overlap: bool = False,
     ) -> LocalizeResponse:
         """The union, its region on the template body and the covered share of each body part."""
-        return LocalizeResponse(**self._operands("/v1/localize", files, spectra, _params(units=units, scale=scale)))
+        params = _union_params(units, scale, overlap, measure_overlap)
+        return LocalizeResponse(**self._operands("/v1/localize", files, spectra, params))
 
     def reconstruct(
         self,
@@ -123,10 +147,12 @@ class Client:
         *,
         units: Units = "m",
         scale: float | None = None,
+        overlap: Sequence[float] | None = None,
+        measure_overlap: bool = False,
     ) -> ReconstructResponse:
         """The person's body rebuilt from the union's spectrum (rest pose, template topology), with
         its height, area and its own spectrum as the check."""
-        params = _params(units=units, scale=scale)
+        params = _union_params(units, scale, overlap, measure_overlap)
         return ReconstructResponse(**self._operands("/v1/reconstruct", files, spectra, params))
 
     def retrieve(
@@ -137,9 +163,11 @@ class Client:
         top: int = 10,
         units: Units = "m",
         scale: float | None = None,
+        overlap: Sequence[float] | None = None,
+        measure_overlap: bool = False,
     ) -> RetrieveResponse:
         """The stored complete shapes nearest to the union of the operands."""
-        params = _params(top=top, units=units, scale=scale)
+        params = {"top": top, **_union_params(units, scale, overlap, measure_overlap)}
         return RetrieveResponse(**self._operands("/v1/retrieve", files, spectra, params))
 
     def models(self) -> ModelsResponse:
@@ -197,3 +225,9 @@ def _part(scan: Scan) -> tuple[str, bytes, str]:
 def _params(**values: object) -> dict:
     """Query parameters without the ``None`` ones (the service's defaults apply)."""
     return {key: value for key, value in values.items() if value is not None}
+
+
+def _union_params(units: Units, scale: float | None, overlap: Sequence[float] | None, measure: bool) -> dict:
+    """The union-based routes' query parameters: units, and the overlap told or to be measured."""
+    told = ",".join(repr(float(share)) for share in overlap) if overlap is not None else None
+    return _params(units=units, scale=scale, overlap=told, measure_overlap=measure or None)

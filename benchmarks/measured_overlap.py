@@ -8,6 +8,11 @@ re-meshed rows, as the data build does), its overlap measured as ``measure_overl
 (:mod:`app.geometry.overlap`), and set against the share from the template's areas. Then the
 served union operator's mean relative error untold, told the true share, and told the measured
 one. Needs the data set's ``work/shapes.npy`` (the posed bodies); a random subset of ``--rows``.
+
+Then Test C's chains of consecutive views (one posed body each) as the session page sends them:
+each view's footprint token, each step measured from the union so far's token and the next
+view's (``POST /v1/overlap``), the chain folded untold, told the true shares and told the
+measured ones.
 """
 
 import argparse
@@ -16,19 +21,28 @@ from pathlib import Path
 import numpy as np
 
 from app.geometry.laplacian import mesh_operators
-from app.geometry.overlap import Footprint, footprint_of, measured_overlaps
+from app.geometry.overlap import (
+    FOOTPRINT_POINTS,
+    Footprint,
+    footprint_from_token,
+    footprint_of,
+    footprint_token,
+    measured_fold,
+    measured_overlaps,
+)
 from training.data.spectra import MESH, REMESHED, region_mesh, remeshed
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors, served_told_predictor
 from training.learning.spectral_errors import spectral_errors
 
 
-def footprint(vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray, variant: str) -> Footprint:
-    """A view as the service would see it uploaded: its part mesh in the posed body's frame."""
+def footprint(vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray, variant: str, points: int) -> Footprint:
+    """A view as the service would see it uploaded: its part mesh in the posed body's frame,
+    kept to ``points`` points (FOOTPRINT_POINTS for an upload, WIRE_POINTS for a footprint token)."""
     mesh = region_mesh(vertices, faces, mask)
     if variant == REMESHED:
         mesh = remeshed(mesh)
-    return footprint_of(mesh.vertices, mesh_operators(mesh.vertices, mesh.faces).mass.diagonal())
+    return footprint_of(mesh.vertices, mesh_operators(mesh.vertices, mesh.faces).mass.diagonal(), points)
 
 
 def main() -> None:
@@ -37,6 +51,7 @@ def main() -> None:
     parser.add_argument("--models", type=Path, default=Path("models"))
     parser.add_argument("--rows", type=int, default=400)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--points", type=int, default=FOOTPRINT_POINTS, help="points kept per view")
     args = parser.parse_args()
     data = SpectralData(args.data)
     pairs = data.pairs
@@ -50,7 +65,9 @@ def main() -> None:
         [
             measured_overlaps(
                 [
-                    footprint(np.asarray(bodies[shape], dtype=np.float64), faces, data.masks(np.array([m]))[0], v)
+                    footprint(
+                        np.asarray(bodies[shape], dtype=np.float64), faces, data.masks(np.array([m]))[0], v, args.points
+                    )
                     for m in (mask_a, mask_b)
                 ]
             )[0]
@@ -81,6 +98,54 @@ def main() -> None:
                 f"| {kind or 'all'} / {variant} | {selected.sum()} | {np.abs(gap).mean():.3f} / "
                 f"{np.quantile(np.abs(gap), 0.95):.3f} / {gap.mean():+.3f} | {cells} |"
             )
+    session_chains(data, bodies, union, told)
+
+
+def session_chains(data: SpectralData, bodies: np.ndarray, union, told) -> None:
+    """Test C's chains measured through footprint tokens step by step, as the session page does."""
+    chains = data.chains
+    faces = data.template.faces
+    true_shares, token_shares = [], []
+    for shape, masks in zip(chains.shape, chains.view_masks, strict=True):
+        body = np.asarray(bodies[shape], dtype=np.float64)
+        tokens = [
+            footprint_token(footprint(body, faces, data.masks(np.array([m]))[0], MESH, FOOTPRINT_POINTS)) for m in masks
+        ]
+        shares, so_far = [], tokens[0]
+        for token in tokens[1:]:
+            (share,), union_so_far = measured_fold([footprint_from_token(so_far), footprint_from_token(token)])
+            shares.append(share)
+            so_far = footprint_token(union_so_far)
+        token_shares.append(shares)
+    views = chains.views
+    for step in range(1, views.shape[1]):
+        so_far = chains.view_masks[:, 0] if step == 1 else chains.union_masks[:, step - 2]
+        true_shares.append(data.overlap_shares(so_far, chains.view_masks[:, step]))
+    true = np.stack(true_shares, axis=1)
+    measured = np.array(token_shares)
+    current = {
+        "untold": views[:, 0],
+        "told the true shares": views[:, 0],
+        "told the token-measured shares": views[:, 0],
+    }
+    print(
+        f"\n| chain length | n | share measured − true: mean abs / bias | {' | '.join(f'{n} mre' for n in current)} |"
+    )
+    print("|---" * (3 + len(current)) + "|")
+    for step in range(1, views.shape[1]):
+        current = {
+            "untold": union(current["untold"], views[:, step])[0],
+            "told the true shares": told(current["told the true shares"], views[:, step], true[:, step - 1])[0],
+            "told the token-measured shares": told(
+                current["told the token-measured shares"], views[:, step], measured[:, step - 1]
+            )[0],
+        }
+        if step < 2:
+            continue
+        gap = measured[:, :step] - true[:, :step]
+        truth = chains.unions[:, step - 1]
+        cells = " | ".join(f"{100 * spectral_errors(p, truth)['mre']:.1f} %" for p in current.values())
+        print(f"| {step + 1} | {len(truth)} | {np.abs(gap).mean():.3f} / {gap.mean():+.3f} | {cells} |")
 
 
 if __name__ == "__main__":

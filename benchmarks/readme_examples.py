@@ -19,6 +19,7 @@ from pathlib import Path
 import httpx
 
 from app.core.config import Settings
+from app.geometry.overlap import TOKEN_PREFIX
 from app.inference.template import Template
 from app.samples import sample_overlap, write_samples
 
@@ -27,6 +28,7 @@ README, EXAMPLES = ROOT / "README.md", ROOT / "app" / "api" / "examples.json"
 BEGIN, END = "<!-- examples:begin -->", "<!-- examples:end -->"
 PARTS = ("no_head_neck.ply", "no_left_forearm_hand.ply")
 KEY = "change-me"
+TOKEN_SHOWN = 24  # characters of a footprint token shown and recorded
 
 
 def rounded(value):
@@ -42,7 +44,9 @@ def rounded(value):
 
 def shown(value, cut: int = 3) -> str:
     """JSON as the README shows it: rounded, lists over ``cut`` items cut to ``cut`` and "…",
-    part coverage cut to four parts."""
+    part coverage cut to four parts, footprint tokens to their start."""
+    if isinstance(value, str) and value.startswith(TOKEN_PREFIX):
+        return json.dumps(value[:TOKEN_SHOWN] + "…", ensure_ascii=False)
     if isinstance(value, dict):
         items = list(value.items())
         tail = ""
@@ -104,6 +108,21 @@ def main() -> None:
             f"curl -s {both} '{url}/v1/union?measure_overlap=true'",
             client.post("/v1/union", params={"measure_overlap": "true"}, files=files(folder)),
         )
+        views = [
+            client.post("/v1/spectrum", params={"footprint": "true"}, files={"file": (n, (folder / n).read_bytes())})
+            for n in PARTS
+        ]
+        view = views[0].json()
+        show_text(
+            f"curl -s -F file=@{PARTS[0]} '{url}/v1/spectrum?footprint=true' > view0.json  # view1.json: {PARTS[1]}",
+            shown({k: view[k] for k in ("eigenvalues", "area_m2", "footprint")}),
+        )
+        tokens = json.dumps([v.json()["footprint"] for v in views])
+        measured = show(
+            f"curl -s -F \"footprints=$(jq -sc 'map(.footprint)' view0.json view1.json)\" {url}/v1/overlap",
+            client.post("/v1/overlap", data={"footprints": tokens}),
+        )
+        recorded["overlap"] = rounded({**measured, "union_footprint": measured["union_footprint"][:TOKEN_SHOWN] + "…"})
         localized = client.post("/v1/localize", files=files(folder)).json()
         recorded["localize"] = rounded({**localized, "vertices": localized["vertices"][:5]})
         region = {k: localized[k] for k in ("vertices", "area_fraction", "part_coverage", "template_vertices")}

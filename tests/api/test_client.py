@@ -42,6 +42,23 @@ def test_a_union_of_files_equals_the_union_of_their_spectra_in_either_order(serv
     assert np.all(np.asarray(by_files.lower) <= by_files.eigenvalues)
 
 
+def test_registered_views_sent_one_by_one_are_told_the_overlap_their_uploads_measure(service, scans):
+    """The two patches (one surface, one frame) posted with their footprints: the overlap the
+    tokens measure is the one the uploads measure together, and a union told it by every route
+    is the one measured from the uploads."""
+    views = [service.spectrum(scan, footprint=True) for scan in scans]
+    assert all(view.footprint.startswith("fp1.") for view in views)
+    measured = service.overlap([view.footprint for view in views])
+    together = service.union(files=scans, measure_overlap=True)
+    assert measured.overlaps == pytest.approx(together.overlaps, abs=0.01)
+    spectra = [view.eigenvalues for view in views]
+    told = service.union(spectra=spectra, overlap=measured.overlaps)
+    assert told.overlaps == pytest.approx(measured.overlaps)
+    np.testing.assert_allclose(told.eigenvalues, together.eigenvalues, rtol=0.02)
+    localized = service.localize(spectra=spectra, overlap=measured.overlaps)
+    assert localized.eigenvalues == told.eigenvalues
+
+
 def test_localize_and_retrieve_answer_as_the_raw_endpoints_do(service, scans, client):
     spectra = [o.eigenvalues for o in service.union(files=scans).operands]
     region = service.localize(spectra=spectra)

@@ -94,6 +94,7 @@ def test_documented_error_examples_are_the_messages_the_service_sends(tmp_path):
 def test_every_json_answer_has_a_success_example_that_its_model_accepts():
     from app.api.routes.localize import LocalizeResponse
     from app.api.routes.models import ModelsResponse
+    from app.api.routes.overlap import OverlapResponse
     from app.api.routes.reconstruct import ReconstructResponse
     from app.api.routes.retrieve import RetrieveResponse
     from app.api.routes.shapes import ShapeOut, ShapePage
@@ -103,6 +104,7 @@ def test_every_json_answer_has_a_success_example_that_its_model_accepts():
     models = {
         ("post", "/v1/spectrum", "200"): SpectrumReport,
         ("post", "/v1/union", "200"): UnionResponse,
+        ("post", "/v1/overlap", "200"): OverlapResponse,
         ("post", "/v1/localize", "200"): LocalizeResponse,
         ("post", "/v1/reconstruct", "200"): ReconstructResponse,
         ("post", "/v1/retrieve", "200"): RetrieveResponse,

@@ -103,8 +103,11 @@ def _drawn_share(element) -> float:
     return float(np.mean(np.abs(pixels.astype(int) - BACKGROUND).sum(axis=1) > 30))
 
 
-def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(base, scans, browser):
+def _drop_one_at_a_time(browser, base: str, scans: list[Path], *, registered: bool = False) -> None:
+    """A fresh page, "registered scans" ticked or not, each scan dropped once the last is shown."""
     browser.get(f"{base}/")
+    if registered:
+        browser.find_element(By.ID, "registered").click()
     upload = browser.find_element(By.ID, "file")
     for count, path in enumerate(scans, start=1):
         upload.send_keys(str(path))
@@ -112,6 +115,10 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
             lambda b, n=count: b.find_element(By.TAG_NAME, "body").get_attribute("data-parts") == str(n)
         )
     assert "problem" not in browser.find_element(By.ID, "status").get_attribute("class")
+
+
+def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(base, scans, browser):
+    _drop_one_at_a_time(browser, base, scans)
 
     expected = _expected_region(base, scans)
     shown = {
@@ -145,6 +152,34 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
 
     if os.environ.get("SESSION_SCREENSHOT"):
         browser.save_screenshot(os.environ["SESSION_SCREENSHOT"])
+
+
+def test_a_registered_session_measures_each_scan_s_overlap_and_tells_the_union(base, scans, browser):
+    """With "registered scans" (the two parts are views of the template in one frame): the page
+    shows the overlap /v1/overlap measures from the API's own footprint tokens, and the coverage
+    it shows is that of the union told that overlap, not the untold one."""
+    _drop_one_at_a_time(browser, base, scans, registered=True)
+    assert browser.find_element(By.ID, "registered").get_attribute("disabled") is not None
+
+    views = [
+        httpx.post(
+            f"{base}/v1/spectrum", params={"footprint": "true"}, files={"file": (p.name, p.read_bytes())}, timeout=60
+        ).json()
+        for p in scans
+    ]
+    tokens = json.dumps([view["footprint"] for view in views])
+    (share,) = httpx.post(f"{base}/v1/overlap", data={"footprints": tokens}, timeout=60).json()["overlaps"]
+    second = browser.find_elements(By.CSS_SELECTOR, "#parts li")[1]
+    assert second.get_attribute("data-overlap") == f"{share:.4f}"
+    spectra = json.dumps([view["eigenvalues"] for view in views])
+    told = httpx.post(f"{base}/v1/localize", params={"overlap": share}, data={"spectra": spectra}, timeout=60).json()
+    untold = _expected_region(base, scans)
+    shown = {
+        item.get_attribute("data-part"): float(item.get_attribute("data-coverage"))
+        for item in browser.find_elements(By.CSS_SELECTOR, "#coverage li")
+    }
+    assert shown == pytest.approx(told["part_coverage"], abs=1e-4)
+    assert told["part_coverage"] != pytest.approx(untold["part_coverage"], abs=1e-3)  # told it, the answer moved
 
 
 def test_the_page_and_its_script_load_nothing_from_another_host(base):

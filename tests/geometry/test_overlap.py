@@ -1,10 +1,21 @@
 """Measured overlap of views in one frame, against rectangles whose shared area is known."""
 
+import base64
+
 import numpy as np
 import pytest
 
 from app.geometry.laplacian import mesh_operators
-from app.geometry.overlap import Footprint, footprint_of, measured_overlaps
+from app.geometry.overlap import (
+    TOKEN_PREFIX,
+    WIRE_POINTS,
+    Footprint,
+    footprint_from_token,
+    footprint_of,
+    footprint_token,
+    measured_fold,
+    measured_overlaps,
+)
 from app.geometry.shapes import Mesh
 from tests.conftest import grid
 
@@ -55,3 +66,57 @@ def test_a_long_chain_of_dense_views_keeps_its_union_bounded_and_its_shares_righ
     views = [view(1, 1, 200, shift=0.5 * i) for i in range(6)]
     assert all(len(v.points) == 32_768 for v in views)
     assert measured_overlaps(views) == pytest.approx([0.5] * 5, abs=0.03)
+
+
+def test_a_footprint_token_reads_back_as_the_footprint_it_was_made_of():
+    small = view(2, 1, 40)  # 3 321 points: kept whole
+    back = footprint_from_token(footprint_token(small))
+    np.testing.assert_array_equal(back.points, small.points)
+    np.testing.assert_array_equal(back.weights, small.weights)
+    assert not back.spread.any()  # every point a vertex of the mesh
+
+
+def test_a_large_view_s_token_is_thinned_and_measures_the_same_share():
+    large, other = view(2, 1, 120), view(2, 1, 40, shift=1.0)
+    back = footprint_from_token(footprint_token(large))
+    assert len(large.points) > WIRE_POINTS == len(back.points) and back.area == pytest.approx(large.area, rel=1e-5)
+    (share,) = measured_overlaps([back, other])
+    assert share == pytest.approx(0.5, abs=0.03)
+
+
+def test_a_chain_told_view_by_view_through_the_union_s_token_measures_what_all_at_once_does():
+    """[0, 2], [1, 3], then [2.5, 3.5]: the second step measured from the first step's union
+    token and the third view alone is the fold's (a half each time)."""
+    views = [view(2, 1, 40), view(2, 1, 47, shift=1.0), view(1, 1, 40, shift=2.5)]
+    first, union = measured_fold(views[:2])
+    assert union.area == pytest.approx(3.0, rel=0.03)  # the shared metre counted once
+    (second,) = measured_overlaps([footprint_from_token(footprint_token(union)), views[2]])
+    assert [*first, second] == pytest.approx(measured_overlaps(views), abs=0.02)
+    assert [*first, second] == pytest.approx([0.5, 0.5], abs=0.03)
+
+
+def _token(rows: np.ndarray) -> str:
+    return TOKEN_PREFIX + base64.b64encode(np.asarray(rows, dtype="<f4").tobytes()).decode()
+
+
+@pytest.mark.parametrize(
+    ("token", "reason"),
+    [
+        ("AAAA", "not a footprint token"),
+        (TOKEN_PREFIX + "not base64!", "not valid base64"),
+        (TOKEN_PREFIX, "whole"),
+        (TOKEN_PREFIX + base64.b64encode(b"\0" * 16).decode(), "whole"),
+        (_token(np.ones((WIRE_POINTS + 1, 5))), f"more than {WIRE_POINTS}"),
+        (_token([[0, 0, np.nan, 1, 0]]), "not finite"),
+        (_token([[0, 0, 0, np.inf, 0]]), "not finite"),
+        (_token([[0, 0, 0, 0, 0]]), "not positive"),
+        (_token([[0, 0, 0, -1, 0]]), "not positive"),
+        (_token([[0, 0, 0, 3e38, 0]]), "sum past"),
+        (_token([[3e38, 0, 0, 1, 0]]), "beyond"),
+        (_token([[0, 0, 0, 1, 3e38]]), "beyond"),
+        (_token([[0, 0, 0, 1, -1]]), "negative spreads"),
+    ],
+)
+def test_what_is_not_a_footprint_token_says_why(token, reason):
+    with pytest.raises(ValueError, match=reason):
+        footprint_from_token(token)

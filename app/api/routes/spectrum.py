@@ -1,14 +1,19 @@
 """``POST /v1/spectrum``: the truncated Laplace–Beltrami spectrum of an uploaded shape."""
 
+from dataclasses import asdict, dataclass
 from typing import Annotated, Literal
 
+import anyio
 from fastapi import APIRouter, File, Form, Query, Request, Response, UploadFile
+from pydantic import Field
 
 from app.api.deps import SettingsDep
 from app.api.examples import success
 from app.api.operands import solve_upload, upload_options
 from app.api.problems import UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
+from app.core.errors import InputError
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
+from app.geometry.overlap import footprint_token
 from app.geometry.pipeline import SpectrumReport
 from app.geometry.spectrum import DEFAULT_K, MAX_K
 
@@ -16,9 +21,22 @@ router = APIRouter(tags=["spectra"])
 NPZ_MEDIA_TYPE = "application/x-npz"  # numpy's zip of NPY arrays; np.load reads it
 
 
+@dataclass(frozen=True, kw_only=True)
+class FootprintedReport(SpectrumReport):
+    """The report, and where the shape lies (asked with ``footprint=true``)."""
+
+    footprint: Annotated[
+        str,
+        Field(
+            description="The shape's footprint token: its surface as 4 096 points at most, in metres, for "
+            "POST /v1/overlap to measure how much registered views overlap without uploading them again."
+        ),
+    ]
+
+
 @router.post(
     "/spectrum",
-    response_model=SpectrumReport,
+    response_model=SpectrumReport | FootprintedReport,
     responses={
         **problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS),
         200: {"content": {NPZ_MEDIA_TYPE: {}, **success("spectrum")[200]["content"]}},
@@ -43,11 +61,26 @@ async def spectrum(
             "(this JSON answer, as a string). At most 5 000 000 values (vertices × k)."
         ),
     ] = False,
-) -> SpectrumReport | Response:
+    footprint: Annotated[
+        bool,
+        Query(
+            description="Also the shape's footprint token (see POST /v1/overlap): for a scanner's registered "
+            "views, whose overlaps are then measured from the tokens. Not with vectors."
+        ),
+    ] = False,
+) -> SpectrumReport | FootprintedReport | Response:
     """First k Dirichlet (or, for a closed surface, plain) Laplace–Beltrami eigenvalues in 1/m²."""
     resolved_type = resolve_file_type(file.filename, file_type)
     data = await file.read()
     options = upload_options(settings, k, units, scale, closed=closed, boundary=boundary)
+    if footprint and vectors:
+        raise InputError("footprint and vectors cannot be asked together")
+    if footprint:
+        solved = await request.app.state.solver.solve_with_functions(
+            data, resolved_type, options, vectors=False, footprint=True
+        )
+        token = await anyio.to_thread.run_sync(footprint_token, solved.footprint)
+        return FootprintedReport(**asdict(solved.report), footprint=token)
     if not vectors:
         return await solve_upload(request, data, resolved_type, options)
     solved = await request.app.state.solver.solve_with_functions(data, resolved_type, options)

@@ -1,12 +1,16 @@
 // The scanning-session page: each dropped scan is solved once by POST /v1/spectrum; after
 // that only spectra are sent. After every scan the page asks /v1/localize (JSON and the
 // coloured template as PLY), /v1/retrieve and /v1/reconstruct (the rebuilt body as PLY, its
-// height and spectrum check in headers) for the union of all parts so far.
+// height and spectrum check in headers) for the union of all parts so far. With "registered
+// scans" (one scanner's views: one frame, one pose) each scan's footprint token comes back
+// with its spectrum, POST /v1/overlap measures the new scan against the union so far's token,
+// and every union is told those overlaps.
 import * as THREE from "three";
 import { OrbitControls } from "/static/vendor/three/OrbitControls.js";
 import { PLYLoader } from "/static/vendor/three/PLYLoader.js";
 
-const parts = []; // {name, eigenvalues, warnings}
+const parts = []; // {name, eigenvalues, warnings, overlap (registered scans after the first)}
+let unionFootprint = null; // registered scans: the footprint token of the union so far
 const $ = (id) => document.getElementById(id);
 const SVG = "http://www.w3.org/2000/svg";
 
@@ -21,6 +25,25 @@ function spectraForm() {
   return form;
 }
 
+// The union routes' query: the overlaps measured so far (one per union step), when registered.
+function told(query = "") {
+  const overlaps = parts.slice(1).map((part) => part.overlap);
+  const params = new URLSearchParams(query);
+  if ($("registered").checked && overlaps.length) params.set("overlap", overlaps.join(","));
+  const text = params.toString();
+  return text ? `?${text}` : "";
+}
+
+// A registered scan's overlap with the union so far (undefined for the first scan), and the
+// token of the union with it: asked before the scan joins, so a failure leaves the session as it was.
+async function measured(footprint) {
+  if (unionFootprint === null) return { overlap: undefined, union: footprint };
+  const form = new FormData();
+  form.append("footprints", JSON.stringify([unionFootprint, footprint]));
+  const found = await answer(await fetch("/v1/overlap", { method: "POST", body: form }));
+  return { overlap: found.overlaps[0], union: found.union_footprint };
+}
+
 async function answer(response) {
   const body = response.headers.get("content-type")?.includes("json") ? await response.json() : null;
   if (!response.ok) {
@@ -33,9 +56,14 @@ async function addScan(file) {
   setStatus(`Solving ${file.name}…`);
   const form = new FormData();
   form.append("file", file, file.name);
+  const registered = $("registered").checked;
   try {
-    const report = await answer(await fetch(`/v1/spectrum?units=${$("units").value}`, { method: "POST", body: form }));
-    parts.push({ name: file.name, eigenvalues: report.eigenvalues, warnings: report.warnings });
+    const query = `units=${$("units").value}${registered ? "&footprint=true" : ""}`;
+    const report = await answer(await fetch(`/v1/spectrum?${query}`, { method: "POST", body: form }));
+    const { overlap, union } = registered ? await measured(report.footprint) : {};
+    parts.push({ name: file.name, eigenvalues: report.eigenvalues, warnings: report.warnings, overlap });
+    if (registered) unionFootprint = union;
+    $("registered").disabled = true; // one kind of session: every scan registered, or none
     await refresh();
   } catch (error) {
     setStatus(`${file.name}: ${error.message}`, true);
@@ -46,6 +74,10 @@ async function refresh() {
   const item = (part) => {
     const li = document.createElement("li");
     li.textContent = `${part.name}: λ₁ = ${part.eigenvalues[0].toFixed(3)}`;
+    if (part.overlap !== undefined) {
+      li.dataset.overlap = part.overlap.toFixed(4);
+      li.textContent += `; ${(100 * part.overlap).toFixed(0)} % inside the scans before (measured)`;
+    }
     for (const warning of part.warnings) {
       const note = document.createElement("span");
       note.className = "warning";
@@ -57,10 +89,10 @@ async function refresh() {
   $("parts").replaceChildren(...parts.map(item));
   setStatus(`Uniting ${parts.length} part${parts.length > 1 ? "s" : ""}…`);
   const [region, ply, found, rebuilt] = await Promise.all([
-    fetch("/v1/localize", { method: "POST", body: spectraForm() }).then(answer),
-    fetch("/v1/localize?format=ply", { method: "POST", body: spectraForm() }).then((r) => r.arrayBuffer()),
-    fetch("/v1/retrieve?top=5", { method: "POST", body: spectraForm() }).then(answer),
-    fetch("/v1/reconstruct?format=ply", { method: "POST", body: spectraForm() }),
+    fetch(`/v1/localize${told()}`, { method: "POST", body: spectraForm() }).then(answer),
+    fetch(`/v1/localize${told("format=ply")}`, { method: "POST", body: spectraForm() }).then((r) => r.arrayBuffer()),
+    fetch(`/v1/retrieve${told("top=5")}`, { method: "POST", body: spectraForm() }).then(answer),
+    fetch(`/v1/reconstruct${told("format=ply")}`, { method: "POST", body: spectraForm() }),
   ]);
   plot(region);
   covered.show(ply);
