@@ -1,6 +1,7 @@
 """How well the service measures two views' overlap, and what the union gains from it.
 
     python benchmarks/measured_overlap.py [--data data/standard] [--models models] [--rows 400]
+        [--points 32768] [--split test_c]
 
 Test C's camera-view pairs whose two views are in one pose (the same posed body, as a scanner's
 registered views are): each view's part mesh is rebuilt in that pose (re-meshed for the
@@ -52,10 +53,11 @@ def main() -> None:
     parser.add_argument("--rows", type=int, default=400)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--points", type=int, default=FOOTPRINT_POINTS, help="points kept per view")
+    parser.add_argument("--split", default="test_c", help="whose one-pose pairs (validation: to choose a rule on)")
     args = parser.parse_args()
     data = SpectralData(args.data)
     pairs = data.pairs
-    one_pose = np.flatnonzero((pairs.split == "test_c") & (pairs.shape_a == pairs.shape_b))
+    one_pose = np.flatnonzero((pairs.split == args.split) & (pairs.shape_a == pairs.shape_b))
     chosen = np.sort(np.random.default_rng(args.seed).choice(one_pose, min(args.rows, len(one_pose)), replace=False))
     rows = pairs.rows(chosen)
     bodies = np.load(args.data / "work" / "shapes.npy", mmap_mode="r")
