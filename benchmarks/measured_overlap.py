@@ -31,6 +31,7 @@ from app.geometry.overlap import (
     measured_fold,
     measured_overlaps,
 )
+from app.geometry.topology import boundary_vertex_mask
 from training.data.spectra import MESH, REMESHED, region_mesh, remeshed
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors, served_told_predictor
@@ -43,7 +44,8 @@ def footprint(vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray, variant
     mesh = region_mesh(vertices, faces, mask)
     if variant == REMESHED:
         mesh = remeshed(mesh)
-    return footprint_of(mesh.vertices, mesh_operators(mesh.vertices, mesh.faces).mass.diagonal(), points)
+    edge = boundary_vertex_mask(mesh.faces, len(mesh.vertices))
+    return footprint_of(mesh.vertices, mesh_operators(mesh.vertices, mesh.faces).mass.diagonal(), points, edge=edge)
 
 
 def main() -> None:

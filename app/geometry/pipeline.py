@@ -200,5 +200,5 @@ def _solve(
     if free_functions is not None:
         functions = np.zeros((n, k))
         functions[slice(None) if fixed is None else ~fixed] = free_functions
-    shape = None if points is None else footprint_of(points, operators.mass.diagonal())
+    shape = None if points is None else footprint_of(points, operators.mass.diagonal(), edge=fixed)
     return Solved(report, functions, sources, shape)

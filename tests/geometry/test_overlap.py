@@ -1,6 +1,7 @@
 """Measured overlap of views in one frame, against rectangles whose shared area is known."""
 
 import base64
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -17,22 +18,30 @@ from app.geometry.overlap import (
     measured_overlaps,
 )
 from app.geometry.shapes import Mesh
+from app.geometry.topology import boundary_vertex_mask
 from tests.conftest import grid
 
 
 def view(width: float, height: float, cells_per_metre: int, shift: float = 0.0, lift: float = 0.0) -> Footprint:
-    """A flat rectangular view, [shift, shift + width] × [0, height] at z = lift, meshed at its own density."""
+    """A flat rectangular view, [shift, shift + width] × [0, height] at z = lift, meshed at its own
+    density, its border its edge (as a solve marks its Dirichlet vertices)."""
     mesh = grid(width, height, int(width * cells_per_metre), int(height * cells_per_metre))
     vertices = mesh.vertices + np.array([shift, 0.0, lift])
-    return footprint_of(vertices, mesh_operators(vertices, mesh.faces).mass.diagonal())
+    edge = boundary_vertex_mask(mesh.faces, len(vertices))
+    return footprint_of(vertices, mesh_operators(vertices, mesh.faces).mass.diagonal(), edge=edge)
 
 
 @pytest.mark.parametrize("densities", [(40, 40), (40, 57), (90, 33)])
 def test_two_views_sharing_half_their_area_measure_a_half(densities):
-    """Two 2 × 1 m views sharing 1 × 1 m, meshed alike or not: the smaller (either) is half inside."""
+    """Two 2 × 1 m views sharing 1 × 1 m, meshed alike or not: the smaller (either) is half inside,
+    to 0.005 (0.0002–0.0023 measured): a point whose nearest other point is on the other's edge
+    counts half. Without the edges the band one spacing wide past each edge counted whole
+    (0.506–0.511 measured)."""
     first, second = view(2, 1, densities[0]), view(2, 1, densities[1], shift=1.0)
     (share,) = measured_overlaps([first, second])
-    assert share == pytest.approx(0.5, abs=0.03)
+    assert share == pytest.approx(0.5, abs=0.005)
+    no_edges = [replace(v, edge=np.zeros_like(v.edge)) for v in (first, second)]
+    assert measured_overlaps(no_edges)[0] > share + 0.004
     assert measured_overlaps([second, first]) == pytest.approx([share], abs=0.01)
 
 
@@ -53,9 +62,11 @@ def test_a_chain_measures_each_view_against_the_union_so_far():
 def test_a_large_view_is_subsampled_to_the_same_area():
     mesh: Mesh = grid(2, 1, 400, 200)
     areas = mesh_operators(mesh.vertices, mesh.faces).mass.diagonal()
-    whole, kept = footprint_of(mesh.vertices, areas), footprint_of(mesh.vertices, areas, limit=5_000)
+    border = boundary_vertex_mask(mesh.faces, len(mesh.vertices))
+    whole, kept = footprint_of(mesh.vertices, areas), footprint_of(mesh.vertices, areas, limit=5_000, edge=border)
     assert len(mesh.vertices) > 32_768 and len(whole.points) == 32_768 and whole.area == pytest.approx(2.0, rel=1e-5)
     assert len(kept.points) == 5_000 and kept.area == pytest.approx(2.0, rel=1e-5)
+    assert kept.edge.sum() == pytest.approx(border.sum() * 5_000 / len(mesh.vertices), rel=0.2)  # thinned alike
     (share,) = measured_overlaps([kept, view(2, 1, 40, shift=1.0)])
     assert share == pytest.approx(0.5, abs=0.03)
 
@@ -74,6 +85,8 @@ def test_a_footprint_token_reads_back_as_the_footprint_it_was_made_of():
     np.testing.assert_array_equal(back.points, small.points)
     np.testing.assert_array_equal(back.weights, small.weights)
     assert not back.spread.any()  # every point a vertex of the mesh
+    np.testing.assert_array_equal(back.edge, small.edge)
+    assert back.edge.sum() == 2 * (80 + 40)  # the rectangle's border
 
 
 def test_a_large_view_s_token_is_thinned_and_measures_the_same_share():
@@ -105,16 +118,17 @@ def _token(rows: np.ndarray) -> str:
         ("AAAA", "not a footprint token"),
         (TOKEN_PREFIX + "not base64!", "not valid base64"),
         (TOKEN_PREFIX, "whole"),
-        (TOKEN_PREFIX + base64.b64encode(b"\0" * 16).decode(), "whole"),
-        (_token(np.ones((WIRE_POINTS + 1, 5))), f"more than {WIRE_POINTS}"),
-        (_token([[0, 0, np.nan, 1, 0]]), "not finite"),
-        (_token([[0, 0, 0, np.inf, 0]]), "not finite"),
-        (_token([[0, 0, 0, 0, 0]]), "not positive"),
-        (_token([[0, 0, 0, -1, 0]]), "not positive"),
-        (_token([[0, 0, 0, 3e38, 0]]), "sum past"),
-        (_token([[3e38, 0, 0, 1, 0]]), "beyond"),
-        (_token([[0, 0, 0, 1, 3e38]]), "beyond"),
-        (_token([[0, 0, 0, 1, -1]]), "negative spreads"),
+        (TOKEN_PREFIX + base64.b64encode(b"\0" * 20).decode(), "whole"),
+        (_token(np.ones((WIRE_POINTS + 1, 6))), f"more than {WIRE_POINTS}"),
+        (_token([[0, 0, np.nan, 1, 0, 0]]), "not finite"),
+        (_token([[0, 0, 0, np.inf, 0, 0]]), "not finite"),
+        (_token([[0, 0, 0, 0, 0, 0]]), "not positive"),
+        (_token([[0, 0, 0, -1, 0, 0]]), "not positive"),
+        (_token([[0, 0, 0, 3e38, 0, 0]]), "sum past"),
+        (_token([[3e38, 0, 0, 1, 0, 0]]), "beyond"),
+        (_token([[0, 0, 0, 1, 3e38, 0]]), "beyond"),
+        (_token([[0, 0, 0, 1, -1, 0]]), "negative spreads"),
+        (_token([[0, 0, 0, 1, 0, 0.5]]), "edge flags"),
     ],
 )
 def test_what_is_not_a_footprint_token_says_why(token, reason):
