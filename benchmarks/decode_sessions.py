@@ -1,0 +1,73 @@
+"""Why a scanning session's chained union decodes to a poor body: the union, or the coverage?
+
+    python benchmarks/decode_sessions.py [--data data/standard] [--models models]
+
+Test C's chains of five consecutive camera views (unseen identities), decoded by the served shape
+decoder (``/v1/reconstruct``'s) from three spectra: the served operator's chained union untold
+(the model card's "session_chain" row), the chain told each step's true overlap, and the true
+spectrum of the five views' union itself (σ 0). Each against the person's rest-pose body after
+rigid alignment, as the card scores it, with the union's area share of the body. If the true
+union decodes no better, what limits the row is how much of the body five views cover, not the
+union operator's error.
+"""
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from app.inference.models import SpectralModels, chained_sigma
+from training.learning.data import SpectralData
+from training.learning.evaluate import served_predictors, served_told_predictor
+from training.reconstruction.evaluate import body_scores
+from training.reconstruction.train import data_set_rest_bodies
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=Path("data/standard"))
+    parser.add_argument("--models", type=Path, default=Path("models"))
+    args = parser.parse_args()
+    data = SpectralData(args.data)
+    models = SpectralModels(args.models)
+    untold, _ = served_predictors(args.models)
+    told = served_told_predictor(args.models)
+    if told is None:
+        raise SystemExit(f"{args.models} has a union operator that does not read the overlap")
+    chains = data.chains
+    truth = data_set_rest_bodies(data).astype(np.float64)[data.identity_of(chains.shape)]
+    views = chains.views
+    shares = [
+        data.overlap_shares(
+            chains.view_masks[:, 0] if step == 1 else chains.union_masks[:, step - 2], chains.view_masks[:, step]
+        )
+        for step in range(1, views.shape[1])
+    ]
+    answers = {}
+    for name, union in (
+        ("operator untold", lambda a, b, step: untold(a, b)),
+        ("operator told the true overlaps", lambda a, b, step: told(a, b, shares[step - 1])),
+    ):
+        current, sigma = views[:, 0], np.zeros_like(views[:, 0])
+        for step in range(1, views.shape[1]):
+            step_union, step_sigma = union(current, views[:, step], step)
+            sigma = chained_sigma(current, sigma, step_union, step_sigma)
+            current = step_union
+        answers[name] = (current, sigma)
+    final = chains.unions[:, -1].astype(np.float64)
+    answers["the true union's spectrum"] = (final, np.zeros_like(final))
+    covered = data.masks(chains.union_masks[:, -1]) @ models.vertex_area / models.vertex_area.sum()
+    print(f"{len(final)} sessions; their union covers {np.median(covered):.2f} of the body (median)")
+    print("| decoded from | vertex mean mm | vertex p95 mm | height error mm | area error |")
+    print("|---|---|---|---|---|")
+    for name, (spectra, sigma) in answers.items():
+        bodies = np.stack([models.reconstruct(s, g) for s, g in zip(spectra, sigma, strict=True)])
+        score = body_scores(bodies, truth, data.template.faces)
+        print(
+            f"| {name} | {score['vertex_mean_mm']:.0f} | {score['vertex_p95_mm']:.0f} | "
+            f"{score['height_mm']:.0f} | {100 * score['area_relative']:.0f} % |"
+        )
+
+
+if __name__ == "__main__":
+    main()
