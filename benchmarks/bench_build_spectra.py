@@ -9,19 +9,17 @@ spectra are compared with the data set's stored ones, so a speed-up that changes
 shows here.
 """
 
-import argparse
 import json
 import time
-from pathlib import Path
 
 import numpy as np
 
+from training.benchmark_arguments import benchmark_parser
 from training.data.workers import chunks, run_tasks, solve_chunk
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/standard"))
+    parser = benchmark_parser(__doc__)
     parser.add_argument("--tasks", type=int, default=2000)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)

@@ -13,12 +13,12 @@ better one, which is why the operator blends them. The numbers the model card qu
 "the neighbours' median alone" come from here.
 """
 
-import argparse
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from training.benchmark_arguments import benchmark_parser
 from training.data.spectra import MESH, REMESHED
 from training.learning.data import SpectralData
 from training.learning.spectral_errors import spectral_errors
@@ -47,8 +47,7 @@ def answers(model: UnionOperator, fitted: np.ndarray, a: np.ndarray, b: np.ndarr
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/standard"))
+    parser = benchmark_parser(__doc__)
     parser.add_argument("--runs", type=Path, default=Path("runs/standard"))
     args = parser.parse_args()
     data = SpectralData(args.data)

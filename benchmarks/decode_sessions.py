@@ -11,12 +11,10 @@ union decodes no better, what limits the row is how much of the body five views 
 union operator's error.
 """
 
-import argparse
-from pathlib import Path
-
 import numpy as np
 
 from app.inference.models import SpectralModels, chained_sigma
+from training.benchmark_arguments import benchmark_parser
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors, served_told_predictor
 from training.reconstruction.evaluate import body_scores
@@ -24,9 +22,7 @@ from training.reconstruction.train import data_set_rest_bodies
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/standard"))
-    parser.add_argument("--models", type=Path, default=Path("models"))
+    parser = benchmark_parser(__doc__, models=True)
     args = parser.parse_args()
     data = SpectralData(args.data)
     models = SpectralModels(args.models)

@@ -15,13 +15,11 @@ IoU when a region may also be confused with its front/back reflection (the templ
 through its coronal plane, nearest vertex), a second symmetry spectra might not tell.
 """
 
-import argparse
-from pathlib import Path
-
 import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist
 
+from training.benchmark_arguments import benchmark_parser
 from training.data.overlaps import CAMERA
 from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION
 from training.data.spectra import MESH
@@ -50,9 +48,7 @@ def log_features(spectra: np.ndarray) -> np.ndarray:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/standard"))
-    parser.add_argument("--models", type=Path, default=Path("models"))
+    parser = benchmark_parser(__doc__, models=True)
     args = parser.parse_args()
     data = SpectralData(args.data)
     region = served_predictors(args.models)[1]["all"]

@@ -16,9 +16,6 @@ view's (``POST /v1/overlap``), the chain folded untold, told the true shares and
 measured ones.
 """
 
-import argparse
-from pathlib import Path
-
 import numpy as np
 
 from app.geometry.laplacian import mesh_operators
@@ -32,6 +29,7 @@ from app.geometry.overlap import (
     measured_overlaps,
 )
 from app.geometry.topology import boundary_vertex_mask
+from training.benchmark_arguments import benchmark_parser
 from training.data.spectra import MESH, REMESHED, region_mesh, remeshed
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors, served_told_predictor
@@ -49,9 +47,7 @@ def footprint(vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray, variant
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/standard"))
-    parser.add_argument("--models", type=Path, default=Path("models"))
+    parser = benchmark_parser(__doc__, models=True)
     parser.add_argument("--rows", type=int, default=400)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--points", type=int, default=FOOTPRINT_POINTS, help="points kept per view")

@@ -15,13 +15,12 @@ wherever the classifier says "nested" (p > 0.5): what a nesting gate as good as 
 classifier would give.
 """
 
-import argparse
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 import torch
 
+from training.benchmark_arguments import benchmark_parser
 from training.learning.data import PairTable, SpectralData
 from training.learning.evaluate import Evaluator, served_predictors
 
@@ -76,9 +75,7 @@ def relative_error(predicted: np.ndarray, truth: np.ndarray) -> np.ndarray:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/standard"))
-    parser.add_argument("--models", type=Path, default=Path("models"))
+    parser = benchmark_parser(__doc__, models=True)
     args = parser.parse_args()
     data = SpectralData(args.data)
     union, localizers = served_predictors(args.models)

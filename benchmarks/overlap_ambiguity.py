@@ -15,12 +15,10 @@ the range being the farther end's distance at each eigenvalue, over the eigenval
 one): a σ term that is stable across strata needs about the same factor in each.
 """
 
-import argparse
-from pathlib import Path
-
 import numpy as np
 
 from app.contract import INTERVAL_Z, UNKNOWN_OVERLAP
+from training.benchmark_arguments import benchmark_parser
 from training.data.spectra import MESH, REMESHED
 from training.learning.data import PairTable, SpectralData
 from training.learning.evaluate import Evaluator, served_told_predictor
@@ -60,9 +58,7 @@ def stratum_row(label: str, rows: PairTable, answers: dict[float, tuple[np.ndarr
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/standard"))
-    parser.add_argument("--models", type=Path, default=Path("models"))
+    parser = benchmark_parser(__doc__, models=True)
     args = parser.parse_args()
     data = SpectralData(args.data)
     told = served_told_predictor(args.models)

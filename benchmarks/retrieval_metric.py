@@ -21,13 +21,13 @@ the query's relative σ and the pose spread); Mahalanobis (pose only); Mahalanob
 and pose). Prints a Markdown table.
 """
 
-import argparse
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from app.retrieval.distance import features
+from training.benchmark_arguments import benchmark_parser
 from training.data.pairs import FULL_COVERAGE
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
@@ -79,8 +79,7 @@ def hits(query_features: np.ndarray, query_shapes: np.ndarray, stored_features: 
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/standard"))
+    parser = benchmark_parser(__doc__)
     parser.add_argument("--runs", type=Path, default=Path("runs/standard"))
     parser.add_argument("--models", type=Path, default=Path("models"))
     args = parser.parse_args()

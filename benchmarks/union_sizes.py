@@ -12,11 +12,9 @@ training rows, which the operator's memory holds; validation's are through the s
 whose memory holds other pairs of the same bodies).
 """
 
-import argparse
-from pathlib import Path
-
 import numpy as np
 
+from training.benchmark_arguments import benchmark_parser
 from training.data.pairs import PARTIAL_UNION
 from training.data.spectra import MESH
 from training.learning.baselines import disjoint_union
@@ -30,9 +28,7 @@ def relative_error(predicted: np.ndarray, truth: np.ndarray) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path("data/standard"))
-    parser.add_argument("--models", type=Path, default=Path("models"))
+    parser = benchmark_parser(__doc__, models=True)
     args = parser.parse_args()
     data = SpectralData(args.data)
     union = served_predictors(args.models)[0]
