@@ -22,7 +22,7 @@ import torch
 
 from training.benchmark_arguments import benchmark_parser
 from training.learning.data import PairTable, SpectralData
-from training.learning.evaluate import Evaluator, served_predictors
+from training.learning.evaluate import served_predictors, strata
 
 NOTHING_ADDED = ("nested", "same_region")  # strata whose union is (one of) the parts
 EPOCHS = 40
@@ -78,12 +78,11 @@ def main() -> None:
     parser = benchmark_parser(__doc__, models=True)
     args = parser.parse_args()
     data = SpectralData(args.data)
-    union, localizers = served_predictors(args.models)
-    evaluator = Evaluator(data, union, localizers)
+    union, _ = served_predictors(args.models)
     splits = {}
     for split in ("train", "validation", "test_a", "test_c"):
         rows = data.pairs.rows(np.flatnonzero(data.pairs.split == split))
-        labels = evaluator.strata(rows)
+        labels = strata(data, rows)
         kept = np.flatnonzero(labels != "identical")  # one spectrum twice: the gate makes it exact
         splits[split] = (rows.rows(kept), labels[kept])
     train_rows, train_labels = splits["train"]

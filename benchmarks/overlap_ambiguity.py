@@ -21,7 +21,7 @@ from app.contract import INTERVAL_Z, UNKNOWN_OVERLAP
 from training.benchmark_arguments import benchmark_parser
 from training.data.spectra import MESH, REMESHED
 from training.learning.data import PairTable, SpectralData
-from training.learning.evaluate import Evaluator, served_told_predictor
+from training.learning.evaluate import served_told_predictor, strata
 from training.learning.spectral_errors import spectral_errors
 
 ENDS = (0.0, 1.0)  # told "nothing shared", told "one inside the other"
@@ -64,14 +64,13 @@ def main() -> None:
     told = served_told_predictor(args.models)
     if told is None:
         raise SystemExit(f"{args.models}: the union graph does not read the overlap")
-    evaluator = Evaluator(data, lambda a, b: told(a, b, np.full(len(a), UNKNOWN_OVERLAP)), {})
     pairs = data.pairs
     print("| split / stratum or group / variant | n | untold mre | 90 % coverage | told 0 mre | told 1 mre "
           "| truth between the ends | σ factor needed | range factor needed |")  # fmt: skip
     print("|---|---|---|---|---|---|---|---|---|")
     for split in ("test_a", "test_c", "test_b"):
         chosen = pairs.rows(np.flatnonzero((pairs.split == split) & np.isin(pairs.variant, [MESH, REMESHED])))
-        labels = chosen.group if split == "test_b" else evaluator.strata(chosen)
+        labels = chosen.group if split == "test_b" else strata(data, chosen)
         answers = {share: told(chosen.a, chosen.b, np.full(len(chosen), share)) for share in (UNKNOWN_OVERLAP, *ENDS)}
         for label in np.unique(labels):
             for variant in (MESH, REMESHED):

@@ -151,6 +151,18 @@ def _run_union(
     return np.concatenate([o[0] for o in outputs]), np.concatenate([o[1] for o in outputs])
 
 
+def strata(data: SpectralData, rows: PairTable) -> np.ndarray:
+    """The overlap stratum (a name of ``STRATA``) of every row."""
+    inside = data.overlap_shares(rows.mask_a, rows.mask_b)
+    same_region = rows.mask_a == rows.mask_b
+    identical = same_region & (rows.shape_a == rows.shape_b) & (rows.variant == MESH)
+    return np.select(
+        [identical, same_region, inside >= NESTED_SHARE, inside > 0.75, inside >= 0.25],
+        list(STRATA[:5]),
+        default=STRATA[5],
+    )
+
+
 @dataclass
 class Evaluator:
     """Everything the rows share: data, predictors, the lookup of the training pairs, areas."""
@@ -194,21 +206,9 @@ class Evaluator:
             out["localization"][name] = {score: float(values.mean()) for score, values in vars(scores).items()}
         return out
 
-    def strata(self, rows: PairTable) -> np.ndarray:
-        """The overlap stratum (a name of ``STRATA``) of every row."""
-        inside = self.data.overlap_shares(rows.mask_a, rows.mask_b)
-        same_region = rows.mask_a == rows.mask_b
-        identical = same_region & (rows.shape_a == rows.shape_b) & (rows.variant == MESH)
-        labels = np.select(
-            [identical, same_region, inside >= NESTED_SHARE, inside > 0.75, inside >= 0.25],
-            list(STRATA[:5]),
-            default=STRATA[5],
-        )
-        return labels
-
     def stratified(self, rows: PairTable, prefix: str) -> dict:
         """:meth:`row` per overlap stratum and variant, keyed ``prefix/stratum/variant``."""
-        labels = self.strata(rows)
+        labels = strata(self.data, rows)
         out = {}
         for stratum in STRATA:
             for variant in (MESH, REMESHED):
@@ -357,7 +357,7 @@ def evaluate(
                     rows[f"{split}/{group}/{variant}"] = evaluator.row(pairs.rows(np.flatnonzero(selection)))
     test_c = pairs.rows(np.flatnonzero(pairs.split == "test_c"))
     overlapping_a = pairs.rows(np.flatnonzero((pairs.split == "test_a") & ~random_pairs))
-    told = evaluator.told_rows(test_c, evaluator.strata(test_c), "test_c")
+    told = evaluator.told_rows(test_c, strata(data, test_c), "test_c")
     for split in SPLITS:  # the paper's rows, told: Test A and Test B by group
         chosen = pairs.rows(np.flatnonzero((pairs.split == split) & random_pairs & (pairs.variant != CLOUD)))
         told |= evaluator.told_rows(chosen, chosen.group, split)
