@@ -1,13 +1,14 @@
-"""Why a scanning session's chained union decodes to a poor body: the union, or the coverage?
+"""What a scanning session's chained union gives downstream, and what limits it: the union or the coverage.
 
-    python benchmarks/decode_sessions.py [--data data/standard] [--models models]
+    python benchmarks/session_downstream.py [--data data/standard] [--models models]
 
-Test C's chains of five consecutive camera views (unseen identities), decoded by the served shape
-decoder (``/v1/reconstruct``'s) from three spectra: the served operator's chained union untold
-(the model card's "session_chain" row), the chain told each step's true overlap, and the true
-spectrum of the five views' union itself (σ 0). Each against the person's rest-pose body after
-rigid alignment, as the card scores it, with the union's area share of the body. If the true
-union decodes no better, what limits the row is how much of the body five views cover, not the
+Test C's chains of five consecutive camera views (unseen identities), read by the served
+localizer (``/v1/localize``'s) and the served shape decoder (``/v1/reconstruct``'s) from three
+spectra: the served operator's chained union untold (the model card's ``session_chain`` rows),
+the chain told each step's true overlap, and the true spectrum of the five views' union itself
+(σ 0). Localization: symmetric area IoU and per-part coverage error against the union's true
+region, as the card scores them; decoding: vertex error against the person's rest-pose body
+after rigid alignment. Where the true union does no better, what limits the row is not the
 union operator's error.
 """
 
@@ -17,6 +18,7 @@ from app.inference.models import SpectralModels, chained_sigma
 from training.benchmark_arguments import benchmark_parser
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors, served_told_predictor
+from training.learning.masks import SERVED_LOCALIZER, symmetric_scores
 from training.reconstruction.evaluate import body_scores
 from training.reconstruction.train import data_set_rest_bodies
 
@@ -26,7 +28,7 @@ def main() -> None:
     args = parser.parse_args()
     data = SpectralData(args.data)
     models = SpectralModels(args.models)
-    untold, _ = served_predictors(args.models)
+    untold, localizers = served_predictors(args.models)
     told = served_told_predictor(args.models)
     if told is None:
         raise SystemExit(f"{args.models} has a union operator that does not read the overlap")
@@ -54,14 +56,19 @@ def main() -> None:
     answers["the true union's spectrum"] = (final, np.zeros_like(final))
     covered = data.masks(chains.union_masks[:, -1]) @ models.vertex_area / models.vertex_area.sum()
     print(f"{len(final)} sessions; their union covers {np.median(covered):.2f} of the body (median)")
-    print("| decoded from | vertex mean mm | vertex p95 mm | height error mm | area error |")
-    print("|---|---|---|---|---|")
+    region = localizers[SERVED_LOCALIZER]
+    template = data.template
+    true_region = data.masks(chains.union_masks[:, -1])
+    print("| from | IoU | coverage error (points) | vertex mean mm | vertex p95 mm | height error mm | area error |")
+    print("|---|---|---|---|---|---|---|")
     for name, (spectra, sigma) in answers.items():
+        located = symmetric_scores(region(spectra), true_region, data.vertex_area, template.mirror, template.labels)
         bodies = np.stack([models.reconstruct(s, g) for s, g in zip(spectra, sigma, strict=True)])
-        score = body_scores(bodies, truth, data.template.faces)
+        score = body_scores(bodies, truth, template.faces)
         print(
-            f"| {name} | {score['vertex_mean_mm']:.0f} | {score['vertex_p95_mm']:.0f} | "
-            f"{score['height_mm']:.0f} | {100 * score['area_relative']:.0f} % |"
+            f"| {name} | {100 * located.iou.mean():.1f} % | {100 * located.coverage_error.mean():.1f} | "
+            f"{score['vertex_mean_mm']:.0f} | {score['vertex_p95_mm']:.0f} | {score['height_mm']:.0f} | "
+            f"{100 * score['area_relative']:.0f} % |"
         )
 
 
