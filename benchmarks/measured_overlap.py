@@ -105,7 +105,7 @@ def session_chains(data: SpectralData, bodies: np.ndarray, union, told) -> None:
     """Test C's chains measured through footprint tokens step by step, as the session page does."""
     chains = data.chains
     faces = data.template.faces
-    true_shares, token_shares = [], []
+    token_shares = []
     for shape, masks in zip(chains.shape, chains.view_masks, strict=True):
         body = np.asarray(bodies[shape], dtype=np.float64)
         tokens = [
@@ -118,10 +118,7 @@ def session_chains(data: SpectralData, bodies: np.ndarray, union, told) -> None:
             so_far = footprint_token(union_so_far)
         token_shares.append(shares)
     views = chains.views
-    for step in range(1, views.shape[1]):
-        so_far = chains.view_masks[:, 0] if step == 1 else chains.union_masks[:, step - 2]
-        true_shares.append(data.overlap_shares(so_far, chains.view_masks[:, step]))
-    true = np.stack(true_shares, axis=1)
+    true = data.chain_shares()
     measured = np.array(token_shares)
     current = {
         "untold": views[:, 0],

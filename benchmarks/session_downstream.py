@@ -35,16 +35,11 @@ def main() -> None:
     chains = data.chains
     truth = data_set_rest_bodies(data).astype(np.float64)[data.identity_of(chains.shape)]
     views = chains.views
-    shares = [
-        data.overlap_shares(
-            chains.view_masks[:, 0] if step == 1 else chains.union_masks[:, step - 2], chains.view_masks[:, step]
-        )
-        for step in range(1, views.shape[1])
-    ]
+    shares = data.chain_shares()
     answers = {}
     for name, union in (
         ("operator untold", lambda a, b, step: untold(a, b)),
-        ("operator told the true overlaps", lambda a, b, step: told(a, b, shares[step - 1])),
+        ("operator told the true overlaps", lambda a, b, step: told(a, b, shares[:, step - 1])),
     ):
         current, sigma = views[:, 0], np.zeros_like(views[:, 0])
         for step in range(1, views.shape[1]):

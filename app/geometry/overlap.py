@@ -149,7 +149,7 @@ def footprint_token(footprint: Footprint) -> str:
 def footprint_from_token(token: str) -> Footprint:
     """A footprint token read back; ``ValueError`` saying why it is not one (not a token, not
     whole rows, over WIRE_POINTS points, values not finite, areas not positive, spreads negative,
-    anything past a body's size in metres)."""
+    edge flags other than 0 and 1, anything past a body's size in metres)."""
     if not isinstance(token, str) or not token.startswith(TOKEN_PREFIX):
         raise ValueError(f"not a footprint token (they start with {TOKEN_PREFIX!r})")
     body = token[len(TOKEN_PREFIX) :]

@@ -151,6 +151,14 @@ class SpectralData:
             shares.append((a & b) @ weights / np.maximum(smaller, 1e-12))
         return np.concatenate(shares) if shares else np.zeros(0)
 
+    def chain_shares(self) -> np.ndarray:
+        """(chains, views − 1) each step's true overlap along the Test C chains, as the left fold
+        ((A ∪ B) ∪ C) ∪ … is told it: the union of the views so far against the next view."""
+        chains = self.chains
+        so_far = np.column_stack([chains.view_masks[:, :1], chains.union_masks[:, :-1]])
+        steps = [self.overlap_shares(so_far[:, i], chains.view_masks[:, i + 1]) for i in range(so_far.shape[1])]
+        return np.stack(steps, axis=1) if steps else np.zeros((len(chains.shape), 0))
+
     def masks(self, indices: np.ndarray) -> np.ndarray:
         """(len(indices), n) boolean template masks."""
         n = len(self.template.vertices)

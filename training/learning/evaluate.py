@@ -269,15 +269,14 @@ class Evaluator:
         if self.told is not None:
             current["operator_told"] = views[:, 0]
         sigma = np.zeros_like(views[:, 0])
+        shares = self.data.chain_shares() if self.told is not None else None
         for length in range(2, views.shape[1] + 1):
             step = views[:, length - 1]
             union, step_sigma = self.union(current["operator"], step)
             sigma = chained_sigma(current["operator"], sigma, union, step_sigma)
             current["operator"] = union
-            if self.told is not None:  # told the share of the smaller of (views so far, next view) inside the other
-                so_far = chains.view_masks[:, 0] if length == 2 else chains.union_masks[:, length - 3]
-                shares = self.data.overlap_shares(so_far, chains.view_masks[:, length - 1])
-                current["operator_told"] = self.told(current["operator_told"], step, shares)[0]
+            if shares is not None:  # told the share of the smaller of (views so far, next view) inside the other
+                current["operator_told"] = self.told(current["operator_told"], step, shares[:, length - 2])[0]
             current["lookup"] = self.lookup.predict(current["lookup"], step)
             current["disjoint_union"] = disjoint_union(current["disjoint_union"], step)
             if length < 3:
