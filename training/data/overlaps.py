@@ -9,11 +9,7 @@ for A ⊂ B. These rows close that gap, most at the price of no new spectrum:
 - *nested*: (A, A ∪ B) of an existing pair, whose union is A ∪ B (no new spectrum): strictly
   nested, or (A, whole body) for a full-coverage pair;
 - *camera*: views of one scanning session (:mod:`training.data.camera`), paired as a handheld
-  scanner pairs them, and chained along the orbit;
-- *camera chain* (training only): the steps of a session's left fold, the union of orbit views
-  0…j−1 with view j for j = 2…4 (no new view spectrum; the unions of four and five views are
-  new). Past three views an orbit's union wraps around the body and its low eigenvalues drop
-  far below anything two views make; the operator must see such steps to fold a session.
+  scanner pairs them, and chained along the orbit.
 
 Camera pairs keep their true union: a real session's union is what the scanner saw, and on a
 posed body a view and its mirror image have different spectra.
@@ -35,7 +31,6 @@ DERIVED = (IDENTICAL, RESCAN, NESTED)
 CAMERA_SAME, CAMERA_POSE, CAMERA_RESCAN = "camera_same", "camera_pose", "camera_rescan"
 CAMERA_CLOSE_UP, CAMERA_NEXT, CAMERA_FAR = "camera_close_up", "camera_next", "camera_far"
 CAMERA = (CAMERA_SAME, CAMERA_POSE, CAMERA_RESCAN, CAMERA_CLOSE_UP, CAMERA_NEXT, CAMERA_FAR)
-CAMERA_CHAIN = "camera_chain"  # a training session's views 0…j−1 united with view j, j ≥ 2
 SESSION_VIEWS = 7  # orbit views 0…4, then the re-scan of view 0 and the close-up inside it
 ORBIT = 5
 TEST_C_GROUPS = ("unknown_man", "unknown_woman", "child")
@@ -73,13 +68,11 @@ def _derived(writer: Rows, table: dict[str, np.ndarray], row: int, kind: str, po
 
 @dataclass(frozen=True)
 class Chains:
-    """Chains of consecutive session views: training triples (the triples table's layout), Test C
-    chains (``CHAIN_COLUMNS``: shape, views 0…4, unions of views 0…1, 0…2, 0…3, 0…4), and the
-    training chains' steps as pair rows (:data:`CAMERA_CHAIN`), to be appended to the table."""
+    """Chains of consecutive session views: training triples (the triples table's layout) and
+    Test C chains (``CHAIN_COLUMNS``: shape, views 0…4, unions of views 0…1, 0…2, 0…3, 0…4)."""
 
     triples: np.ndarray
     test: np.ndarray
-    steps: dict[str, np.ndarray]
 
 
 def session_rows(
@@ -88,7 +81,6 @@ def session_rows(
     """The pairs and chains of every admissible drawn session (see :data:`CAMERA`)."""
     n = len(sampler.template.vertices)
     triples, test = [], []
-    steps = Rows(writer.masks)  # indexes the same masks; its rows go after every other row
     for packed, ok, shape, split, group in zip(
         sessions["masks"], sessions["ok"], sessions["shape"], sessions["split"], sessions["group"], strict=True
     ):
@@ -111,14 +103,9 @@ def session_rows(
         ids = [session.ids[j] for j in range(ORBIT)]
         if split == "train":
             triples.append([0, int(shape), *ids[:3], *prefixes[:2]])
-            for j in range(2, ORBIT):
-                masks = (prefixes[j - 2], ids[j], prefixes[j - 1])
-                steps.put(str(split), str(group), CAMERA_CHAIN, MESH, (int(shape), int(shape)), masks)
         else:
             test.append([int(shape), *ids, *prefixes])
-    return Chains(
-        np.array(triples, dtype=np.int64).reshape(-1, 7), np.array(test, dtype=np.int64).reshape(-1, 10), steps.take()
-    )
+    return Chains(np.array(triples, dtype=np.int64).reshape(-1, 7), np.array(test, dtype=np.int64).reshape(-1, 10))
 
 
 def _another_pose(shape: int, split: str, group: str, poses: tuple[int, int], rng) -> int:

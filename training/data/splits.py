@@ -96,7 +96,6 @@ def assign_rows(
     table["triples"] = np.concatenate([table["triples"], chains.triples])
     table["chains"] = chains.test
     table = _appended(table, _remeshed_training(table, preset.remeshed_train, serial_stream(seed, "remeshed_train")))
-    table = _appended(table, chains.steps)
     return table, np.array(writer.masks)
 
 

@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 
 from app.geometry.laplacian import mesh_operators
-from training.data.overlaps import CAMERA_CHAIN
 from training.data.spectra import MESH
 from training.data.template import Template
 
@@ -68,20 +67,6 @@ class ChainTable:
     union_masks: np.ndarray
 
 
-def _with_validation(split: np.ndarray, scenario: np.ndarray, seed: int) -> np.ndarray:
-    """``split`` with ``VALIDATION_FRACTION`` of the training rows marked "validation".
-
-    Session chain steps (appended to the table after every other row) are carved from their own
-    stream: the rows that were there before keep the validation slice they had.
-    """
-    steps = scenario == CAMERA_CHAIN
-    for rows, stream in ((~steps, 7), (steps, 8)):
-        train = np.flatnonzero((split == "train") & rows)
-        held = np.random.default_rng([seed, stream]).choice(train, int(len(train) * VALIDATION_FRACTION), replace=False)
-        split[held] = "validation"
-    return split
-
-
 class SpectralData:
     """One built data set directory, loaded once."""
 
@@ -92,7 +77,10 @@ class SpectralData:
         self.masks_packed = arrays["masks"]
         self.template = Template.load(root / "template")
         self.shapes_per_identity = int(json.loads((root / "manifest.json").read_text())["preset"]["poses"])
-        split = _with_validation(arrays["split"].astype(object), arrays["scenario"], seed)
+        split = arrays["split"].astype(object)
+        train = np.flatnonzero(split == "train")
+        held = np.random.default_rng([seed, 7]).choice(train, int(len(train) * VALIDATION_FRACTION), replace=False)
+        split[held] = "validation"
         spectra = self.spectra
         pairs = PairTable(
             a=spectra[arrays["spec_a"]],

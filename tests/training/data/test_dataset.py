@@ -10,7 +10,7 @@ from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
 from tests.training.data.synthetic import SyntheticSource, synthetic_template
 from training.data.build import build_dataset
-from training.data.overlaps import CAMERA, CAMERA_CHAIN, IDENTICAL, NESTED, ORBIT, RESCAN, TEST_C_GROUPS
+from training.data.overlaps import CAMERA, IDENTICAL, NESTED, RESCAN, TEST_C_GROUPS
 from training.data.pairs import AREA_TIE, MIN_GAIN, containment, symmetric_iou
 from training.data.presets import PRESETS
 from training.data.regions import MAX_AREA_FRACTION, MIN_AREA_FRACTION, RegionSampler
@@ -223,20 +223,6 @@ def test_camera_rows_and_test_c_chains_are_unions_of_views(data, built):
         views = [unpack(data, m) for m in chain[1:6]]
         for length, union in enumerate(chain[6:], start=2):
             np.testing.assert_array_equal(unpack(data, union), np.any(views[:length], axis=0))
-
-
-def test_training_chain_steps_fold_a_session_left(data):
-    """Each training session's orbit folded view by view: (views 0…j−1, view j) → views 0…j, for
-    j = 2, 3, 4, on one body; each step's union the next step's first part."""
-    steps = np.flatnonzero(data["scenario"] == CAMERA_CHAIN)
-    assert len(steps) > 0 and len(steps) % (ORBIT - 2) == 0
-    assert set(data["split"][steps]) == {"train"} and (data["shape_a"][steps] == data["shape_b"][steps]).all()
-    assert steps.min() > np.flatnonzero(data["scenario"] != CAMERA_CHAIN).max()  # appended after every other row
-    for session in steps.reshape(-1, ORBIT - 2):
-        for row in session:
-            a, b = unpack(data, data["mask_a"][row]), unpack(data, data["mask_b"][row])
-            np.testing.assert_array_equal(unpack(data, data["mask_union"][row]), a | b)
-        np.testing.assert_array_equal(data["mask_a"][session[1:]], data["mask_union"][session[:-1]])
 
 
 def test_remeshed_training_rows_repeat_mesh_training_rows_with_re_meshed_parts(data):

@@ -6,7 +6,6 @@ localizer's size, the tables, and that a checkpoint resumes instead of starting 
 """
 
 import json
-import shutil
 from dataclasses import replace
 
 import numpy as np
@@ -18,9 +17,7 @@ pytest.importorskip("onnxscript")
 from app.contract import UNKNOWN_OVERLAP, union_feeds  # noqa: E402
 from tests.training.data.synthetic import SyntheticSource  # noqa: E402
 from training.data.build import build_dataset  # noqa: E402
-from training.data.overlaps import CAMERA_CHAIN  # noqa: E402
 from training.data.presets import PRESETS  # noqa: E402
-from training.data.rows import COLUMNS  # noqa: E402
 from training.learning import train_union as union_training  # noqa: E402
 from training.learning.data import SpectralData  # noqa: E402
 from training.learning.export import session  # noqa: E402
@@ -92,25 +89,6 @@ def test_training_hides_each_row_s_union_kin_from_its_memory(trained, tmp_path, 
     assert all((expected == row).all(axis=1).any() for row in hidden)
     same_body_only = bodies[:, None] == bodies[None, :]
     assert any(not (same_body_only == row).all(axis=1).any() for row in hidden)  # kin beyond the body
-
-
-def test_appended_chain_steps_leave_the_earlier_validation_slice_as_it_was(trained, tmp_path):
-    """The same data set without its session chain steps (the rows appended last) carves the same
-    validation rows out of the rows before them; the steps get their own share."""
-    root, _ = trained
-    data = SpectralData(root / "data")
-    arrays = dict(np.load(root / "data" / "dataset.npz"))
-    earlier = arrays["scenario"] != CAMERA_CHAIN
-    assert (~earlier).any() and earlier[: earlier.sum()].all()
-    trimmed = tmp_path / "data"
-    shutil.copytree(root / "data", trimmed, ignore=shutil.ignore_patterns("work", "samples"))
-    row_columns = {*COLUMNS, "spec_a", "spec_b", "spec_union"}
-    np.savez(trimmed / "dataset.npz", **{k: v[earlier] if k in row_columns else v for k, v in arrays.items()})
-    without = SpectralData(trimmed)
-    assert len(without.pairs) == earlier.sum() < len(data.pairs)
-    np.testing.assert_array_equal(without.pairs.split, data.pairs.split[: len(without.pairs)])
-    steps = data.pairs.split[len(without.pairs) :]
-    assert set(steps) <= {"train", "validation"} and (steps == "train").any()
 
 
 def test_overlap_shares_are_whole_for_a_part_with_itself_or_inside_the_body_and_told_noisily(trained):
