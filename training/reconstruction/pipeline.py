@@ -30,12 +30,14 @@ BASIS_SIZES = (4, 8, 12, 16, 20, 24, 32, 48)  # components, for the card's "how 
 
 DECODER_PRESETS = {
     "tiny": (
-        DecoderTraining(epochs=3, batch=16, first_restart=3, union_rows=32),
+        DecoderTraining(epochs=3, batch=16, first_restart=3, union_rows=32, partial_rows=32),
         DecoderConfig(components=8, width=32),
     ),
     "standard": (DecoderTraining(), DecoderConfig()),
     # The comparison: the bodies build's own pairs' unions as rows too (needs `build-bodies --pairs`).
     "standard-body-unions": (DecoderTraining(body_unions=True), DecoderConfig()),
+    # The decoder before its partial-union rows (served until 2026-12-03).
+    "standard-no-partial": (DecoderTraining(partial_rows=0), DecoderConfig()),
 }
 
 

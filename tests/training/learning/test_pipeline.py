@@ -23,6 +23,7 @@ from training.learning.data import SpectralData  # noqa: E402
 from training.learning.export import session  # noqa: E402
 from training.learning.pipeline import TRAINING_PRESETS, run_pipeline  # noqa: E402
 from training.learning.train_union import SIZE_BINS, memory_rows, size_weights, train_union, union_kin  # noqa: E402
+from training.reconstruction.train import partial_rows  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -89,6 +90,20 @@ def test_training_hides_each_row_s_union_kin_from_its_memory(trained, tmp_path, 
     assert all((expected == row).all(axis=1).any() for row in hidden)
     same_body_only = bodies[:, None] == bodies[None, :]
     assert any(not (same_body_only == row).all(axis=1).any() for row in hidden)  # kin beyond the body
+
+
+def test_the_decoder_s_partial_rows_are_training_unions_with_a_boundary(trained):
+    """What the decoder learns partial unions from: spectra of unions that have a boundary (a
+    Dirichlet λ₁ well above a closed body's 0), of people the operator trains on, at most as many
+    as asked."""
+    root, _ = trained
+    data = SpectralData(root / "data")
+    spectra, identity = partial_rows(data, 10, seed=0)
+    assert 0 < len(spectra) <= 10 and len(spectra) == len(identity)
+    assert (spectra[:, 0] > 1e-3 * spectra[:, 1]).all()
+    pairs = data.pairs
+    trained_people = data.identity_of(pairs.shape_a[pairs.split == "train"])
+    assert np.isin(identity, trained_people).all()
 
 
 def test_overlap_shares_are_whole_for_a_part_with_itself_or_inside_the_body_and_told_noisily(trained):
