@@ -138,6 +138,10 @@ class SpectralData:
         """Template area (m²) of each of the masks ``indices``."""
         return self.masks(indices) @ self.vertex_area
 
+    def coverage(self, indices: np.ndarray) -> np.ndarray:
+        """Share (0…1) of the template body's area each of the masks ``indices`` covers."""
+        return self.mask_area(indices) / self.vertex_area.sum()
+
     def overlap_shares(self, mask_a: np.ndarray, mask_b: np.ndarray, chunk: int = 2048) -> np.ndarray:
         """(len(mask_a),) the share of the smaller part's template area inside the other part, for
         pairs of mask indices: the overlap strata's measure, and what a caller may tell the union

@@ -144,7 +144,7 @@ def size_weights(data: SpectralData, rows: np.ndarray) -> np.ndarray:
     ~4 % of the rows (`benchmarks/union_sizes.py`); scans come in every size.
     """
     pairs = data.pairs
-    share = data.mask_area(pairs.mask_union[rows]) / data.vertex_area.sum()
+    share = data.coverage(pairs.mask_union[rows])
     whole = pairs.scenario[rows] == FULL_COVERAGE
     bins = np.minimum((share * SIZE_BINS).astype(int), SIZE_BINS - 1)
     counts = np.bincount(bins[~whole], minlength=SIZE_BINS)

@@ -83,7 +83,7 @@ def partial_rows(data: SpectralData, count: int, seed: int) -> Rows:
     complete bodies (a Test C session's five views cover ~0.76 of the body)."""
     pairs = data.pairs
     candidates = np.flatnonzero((pairs.split == "train") & (pairs.mask_union != 0) & (pairs.variant == MESH))
-    coverage = data.mask_area(pairs.mask_union[candidates]) / data.vertex_area.sum()
+    coverage = data.coverage(pairs.mask_union[candidates])
     chosen = candidates[coverage >= PARTIAL_COVERAGE]
     chosen = np.sort(np.random.default_rng([seed, 1]).choice(chosen, min(count, len(chosen)), replace=False))
     return pairs.union[chosen], data.identity_of(pairs.shape_a[chosen])
