@@ -13,6 +13,10 @@ predicted union (σ > 0) to one trained on the operator's unions as well. One ne
 has to compromise: trained on both kinds, it rebuilt measured bodies at 4.0 mm where one trained
 on measured spectra alone gets 2.9, and the latter rebuilt two-part unions at 16 mm instead of 11.
 Fed σ as an input instead, one network did no better on either (4.0 mm, 14.7 mm; model card).
+A measured spectrum of a surface with a boundary (one partial scan, or several merged: λ₁ > 0)
+is no complete body's either, and goes to the union network too, which learned partial unions'
+true spectra: the measured network, which never saw a boundary, rebuilt a Test C session's five
+views from their exact spectrum at 400 mm, the union network at 84 (model card).
 """
 
 from dataclasses import asdict, dataclass
@@ -22,6 +26,10 @@ import torch
 from torch import Tensor, nn
 
 FLOOR = 1e-6  # 1/m²: below any body's λ₂ (~0.5), keeps a union's near-zero λ₂ finite in log space
+# λ₁/λ₂ above which a spectrum is a surface with a boundary. A closed body's λ₁ is 0 up to the
+# solver (λ₁/λ₂ ≤ 3e-13 over the data set's 628 complete bodies); the benchmark's partial unions
+# measure ≥ 0.085, and a hole of 0.2 % of the template's area (a scanner's blind spot) 0.16.
+BOUNDARY_RATIO = 0.01
 
 
 @dataclass(frozen=True)
@@ -91,8 +99,8 @@ class SpectrumNetwork(nn.Module):
 class SpectrumDecoder(nn.Module):
     """(batch, k) complete spectra in 1/m² and their σ → (batch, V, 3) rest-pose vertices in metres.
 
-    A row whose σ is all zero (measured) is read by ``measured``, any other (a predicted union)
-    by ``predicted``.
+    A row whose σ is all zero (measured) and whose λ₁ says the surface is closed is read by
+    ``measured``, any other (a predicted union, or a surface with a boundary) by ``predicted``.
     """
 
     def __init__(self, config: DecoderConfig, basis: ShapeBasis, measured: SpectrumNetwork, predicted: SpectrumNetwork):
@@ -106,7 +114,8 @@ class SpectrumDecoder(nn.Module):
 
     def coefficients(self, spectra: Tensor, sigma: Tensor) -> Tensor:
         """(batch, C) whitened basis coefficients, each row from the network for its kind."""
-        is_measured = (sigma == 0).all(-1, keepdim=True)
+        closed = spectra[:, :1] <= BOUNDARY_RATIO * spectra[:, 1:2]
+        is_measured = (sigma == 0).all(-1, keepdim=True) & closed
         return torch.where(is_measured, self.measured(spectra), self.predicted(spectra))
 
     def forward(self, spectra: Tensor, sigma: Tensor) -> Tensor:

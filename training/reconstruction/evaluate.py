@@ -4,7 +4,9 @@ Queries, all of the benchmark's unknown identities (unknown men, unknown women, 
 whom neither the decoder nor the union operator saw: (a) the true complete spectrum of every
 posed body; (b) the served operator's union of two parts that cover the body (Test A's
 full-coverage pairs); (c) the union of a Test C scanning session, its five views chained, σ
-carried as the service carries it. The decoder reads each with its σ (0 for (a)). Each
+carried as the service carries it; (d) the true spectrum of (c)'s five views, σ = 0: what one
+upload of the views merged, or any single partial scan, asks of the decoder. The decoder reads
+each with its σ (0 for (a) and (d)). Each
 rebuilt body is compared with the person's rest-pose body after a rigid alignment (rotation and
 translation, Kabsch): mean and 95th-percentile vertex error, height and area error. The loop is
 closed on the spectrum: the rebuilt body's own spectrum, by the service's engine, against the
@@ -99,6 +101,8 @@ def query_sets(data: SpectralData, union: Union) -> dict[str, Queries]:
         sigma = chained_sigma(current, sigma, step, step_sigma)
         current = step
     sets["session_chain"] = (current, sigma, data.identity_of(chains.shape))
+    exact = chains.unions[:, -1].astype(np.float64)
+    sets["session_spectrum"] = (exact, np.zeros_like(exact), data.identity_of(chains.shape))
     return sets
 
 

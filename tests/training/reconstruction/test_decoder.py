@@ -77,3 +77,19 @@ def test_a_measured_spectrum_is_read_by_the_measured_network_and_a_union_by_the_
         expected = torch.stack([measured[0], predicted[1], predicted[2]]) @ model.components + model.mean
     np.testing.assert_allclose(got.reshape(3, -1), expected.numpy(), rtol=1e-5, atol=1e-6)
     assert not np.allclose(model.measured(x).detach().numpy(), model.predicted(x).detach().numpy())
+
+
+def test_a_measured_spectrum_of_a_surface_with_a_boundary_is_read_by_the_union_network(bodies, tmp_path):
+    """λ₁ > 0 is a boundary: one partial scan is no complete body, whatever its σ. Rows: closed
+    (λ₁ = 0), λ₁ at 0.1 % of λ₂ (solver noise, still closed), and at 20 % (a hole)."""
+    model = _decoder(bodies)
+    export_decoder(model, tmp_path / "decoder.onnx")
+    spectra = np.repeat(_spectra(1), 3, 0).astype(np.float32)
+    spectra[1, 0], spectra[2, 0] = 1e-3 * spectra[1, 1], 0.2 * spectra[2, 1]
+    feeds = dict(zip(RECONSTRUCTION_INPUTS, (spectra, np.zeros_like(spectra)), strict=True))
+    (got,) = session(tmp_path / "decoder.onnx").run(None, feeds)
+    with torch.no_grad():
+        x = torch.as_tensor(spectra)  # the networks read λ₂…λ_k: the same row to both
+        measured, predicted = model.measured(x), model.predicted(x)
+        expected = torch.stack([measured[0], measured[1], predicted[2]]) @ model.components + model.mean
+    np.testing.assert_allclose(got.reshape(3, -1), expected.numpy(), rtol=1e-5, atol=1e-6)
