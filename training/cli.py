@@ -43,17 +43,22 @@ def build_bodies_command(
     pairs: Annotated[
         bool, typer.Option(help="Also one pair of parts covering each body (for --preset standard-body-unions).")
     ] = False,
+    scans: Annotated[
+        bool, typer.Option(help="Also each body's blind-spot scan and partial unions (the decoder's scan rows).")
+    ] = True,
     template: Annotated[Path, typer.Option(help="The template the parts are cut on (template.npz).")] = Path("models"),
 ) -> None:
     """Sample anny bodies for the shape decoder: rest-pose vertices and posed complete spectra."""
     from training.reconstruction.bodies import BODIES_PRESETS, build_bodies
-    from training.reconstruction.unions import build_body_unions
+    from training.reconstruction.unions import build_body_scans, build_body_unions
 
     if preset not in BODIES_PRESETS:
         raise typer.BadParameter(f"unknown preset {preset!r}")
     typer.echo(build_bodies(BODIES_PRESETS[preset], out, seed=seed, workers=workers))
     if pairs:
         typer.echo(build_body_unions(out, template, seed=seed, workers=workers))
+    if scans:
+        typer.echo(build_body_scans(out, template, seed=seed, workers=workers))
 
 
 DataOption = Annotated[Path, typer.Option(help="A built data set directory.")]

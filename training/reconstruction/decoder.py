@@ -16,7 +16,7 @@ Fed σ as an input instead, one network did no better on either (4.0 mm, 14.7 mm
 A measured spectrum of a surface with a boundary (one partial scan, or several merged: λ₁ > 0)
 is no complete body's either, and goes to the union network too, which learned partial unions'
 true spectra: the measured network, which never saw a boundary, rebuilt a Test C session's five
-views from their exact spectrum at 400 mm, the union network at 84 (model card).
+views from their exact spectrum at 400 mm, the union network at 74 (model card).
 """
 
 from dataclasses import asdict, dataclass

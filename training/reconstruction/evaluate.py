@@ -5,8 +5,10 @@ whom neither the decoder nor the union operator saw: (a) the true complete spect
 posed body; (b) the served operator's union of two parts that cover the body (Test A's
 full-coverage pairs); (c) the union of a Test C scanning session, its five views chained, σ
 carried as the service carries it; (d) the true spectrum of (c)'s five views, σ = 0: what one
-upload of the views merged, or any single partial scan, asks of the decoder. The decoder reads
-each with its σ (0 for (a) and (d)). Each
+upload of the views merged, or any single partial scan, asks of the decoder; (e) each complete
+posed body of (a) scanned with blind spots (:mod:`training.reconstruction.blind_spots`, drawn
+with their own seed), as a complete scan really arrives. The decoder reads each with its σ
+(0 for (a), (d) and (e)). Each
 rebuilt body is compared with the person's rest-pose body after a rigid alignment (rotation and
 translation, Kabsch): mean and 95th-percentile vertex error, height and area error. The loop is
 closed on the spectrum: the rebuilt body's own spectrum, by the service's engine, against the
@@ -28,8 +30,10 @@ from app.inference.models import chained_sigma
 from app.retrieval.distance import features
 from training.data.spectra import MESH
 from training.learning.data import SpectralData
+from training.reconstruction.blind_spots import blind_spot_spectra
 
 UNKNOWN_GROUPS = ("unknown_man", "unknown_woman", "child")
+BLIND_SPOT_SEED = 2026  # the test scans' blind spots: not the training rows' draws
 Decoder = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (n, k) spectra, their σ → (n, V, 3) bodies
 Union = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # (n, k), (n, k) → union, σ
 Queries = tuple[np.ndarray, np.ndarray, np.ndarray]  # spectra (n, k), their σ (n, k), identity (n,)
@@ -103,6 +107,8 @@ def query_sets(data: SpectralData, union: Union) -> dict[str, Queries]:
     sets["session_chain"] = (current, sigma, data.identity_of(chains.shape))
     exact = chains.unions[:, -1].astype(np.float64)
     sets["session_spectrum"] = (exact, np.zeros_like(exact), data.identity_of(chains.shape))
+    scans, scanned = blind_spot_spectra(data, shapes[keep], 1, BLIND_SPOT_SEED, spectra.shape[1])
+    sets["blind_spots"] = (scans, np.zeros_like(scans), data.identity_of(scanned))
     return sets
 
 

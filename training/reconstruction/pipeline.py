@@ -37,7 +37,9 @@ DECODER_PRESETS = {
     # The comparison: the bodies build's own pairs' unions as rows too (needs `build-bodies --pairs`).
     "standard-body-unions": (DecoderTraining(body_unions=True), DecoderConfig()),
     # The decoder before its partial-union rows (served until 2026-12-03).
-    "standard-no-partial": (DecoderTraining(partial_rows=0), DecoderConfig()),
+    "standard-no-partial": (DecoderTraining(partial_rows=0, body_scans=False), DecoderConfig()),
+    # The decoder before the bodies build's scans (served until 2026-12-04).
+    "standard-no-scans": (DecoderTraining(body_scans=False), DecoderConfig()),
 }
 
 

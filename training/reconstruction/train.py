@@ -6,7 +6,9 @@ leave-one-body-out as a new person's would be, so the decoder meets the union's 
 training (the issue's "(b)"), and the true spectra of training unions that cover half the body
 or more but not all of it, so that a scanning session's union before it closes is answered
 with the person's body rather than an extrapolation from complete ones; a second network learns
-the measured spectra alone (the decoder's docstring says why). The target is always the
+the measured spectra alone (the decoder's docstring says why). The union network also learns
+the bodies build's scans (:mod:`training.reconstruction.unions`): every body with blind spots,
+as a complete scan really arrives, and cut to partial unions. The target is always the
 identity's rest-pose body. A tenth of the bodies build's identities is held out for the epoch
 kept; the test identities are the benchmark's unknown ones, which neither this model nor the
 union operator ever saw.
@@ -31,10 +33,9 @@ from training.reconstruction.decoder import (
     SpectrumNetwork,
     spectral_features,
 )
-from training.reconstruction.unions import UNIONS_FILE
+from training.reconstruction.unions import PARTIAL_COVERAGE, SCANS_FILE, UNIONS_FILE
 
 HELD_OUT = 0.1  # of the bodies build's identities, for validation
-PARTIAL_COVERAGE = 0.5  # of the body's area: a union covering less says too little of the person
 Rows = tuple[np.ndarray, np.ndarray]  # (spectra (n, k), index into the bodies (n,))
 
 
@@ -53,6 +54,9 @@ class DecoderTraining(LoopSettings):
     # more but not all of it (0: none): a scanning session's union before it closes (sessions
     # 147 → 81 mm, true spectra 2.8 → 2.9, two-part unions 11.4 → 11.6; model card).
     partial_rows: int = 4000
+    # The bodies build's scans (`build-bodies --scans`) as rows: blind spots and partial unions
+    # of 1 125 people instead of the benchmark's 45 (model card).
+    body_scans: bool = True
     # The operator's unions of the bodies build's own pairs (`build-bodies --pairs`) as rows too:
     # tried, not served (true spectra 4.0 → 4.7 mm, two-part unions 11.2 → 11.2; model card).
     body_unions: bool = False
@@ -62,6 +66,20 @@ def data_set_rest_bodies(data: SpectralData) -> np.ndarray:
     """(identities, V, 3) the benchmark's identities in their rest pose (each one's first shape)."""
     shapes = np.load(data.root / "work" / "shapes.npy", mmap_mode="r")
     return np.asarray(shapes[:: data.shapes_per_identity], dtype=np.float32)
+
+
+def training_people(data: SpectralData) -> np.ndarray:
+    """The benchmark's identities of its training split."""
+    return np.unique(data.identity_of(data.pairs.shape_a[data.pairs.split == "train"]))
+
+
+def body_scan_rows(bodies_dir: Path, train_ids: np.ndarray) -> tuple[Rows, list[Rows]]:
+    """The bodies build's scans: (training rows, [held-out rows of each scan kind])."""
+    scans = np.load(bodies_dir / SCANS_FILE)
+    spectra, body, kind = scans["spectra"], scans["body"], scans["kind"]
+    seen = np.isin(body, train_ids)
+    held = [~seen & (kind == k) for k in np.unique(kind)]
+    return (spectra[seen], body[seen]), [(spectra[rows], body[rows]) for rows in held if rows.any()]
 
 
 def union_rows(data: SpectralData, operator: UnionOperator, count: int, seed: int) -> Rows:
@@ -130,10 +148,10 @@ def train_decoder(
     The network for predicted unions trains on both kinds of rows and is validated on both,
     each from people it does not train on: the held-out bodies' true spectra (and the
     operator's unions of their pairs, with ``body_unions``), and the unions of held-out
-    benchmark identities (a tenth of them; predicted full-body ones and true partial ones, each
-    set checked on its own); the epoch kept has the lowest mean of those vertex
-    errors (on true spectra alone it kept a network that never learned the union's error: 16 mm
-    from two-part unions instead of 12). The network for measured spectra trains and is
+    benchmark identities (a tenth of them; predicted full-body ones and true partial ones), and
+    the held-out bodies' scans of each kind, each set checked on its own; the epoch kept has the
+    lowest mean of those vertex errors (on true spectra alone it kept a network that never
+    learned the union's error: 16 mm from two-part unions instead of 12). The network for measured spectra trains and is
     validated on the true spectra alone. ``checkpoint`` is the first's; the second's is beside
     it (``-measured``).
     """
@@ -146,6 +164,10 @@ def train_decoder(
     # Row sets: training ones, and the validation checks; the measured ones first.
     training, checks = [_rows(spectra, train_ids)], [_rows(spectra, validation_ids)]
     bodies = rest
+    if settings.body_scans:
+        scan_rows, scan_checks = body_scan_rows(bodies_dir, train_ids)
+        training.append(scan_rows)
+        checks += scan_checks
     if data is not None and union_checkpoint is not None:
         operator = load_operator(data, union_checkpoint)
         if settings.body_unions:
@@ -158,7 +180,7 @@ def train_decoder(
             benchmark_rows.append(union_rows(data, operator, settings.union_rows, settings.seed))
         if settings.partial_rows:
             benchmark_rows.append(partial_rows(data, settings.partial_rows, settings.seed))
-        people = np.unique(data.identity_of(data.pairs.shape_a[data.pairs.split == "train"]))
+        people = training_people(data)
         held_people = people[split_bodies(len(people), settings.seed)[1]]
         for spectra_rows, identity in benchmark_rows:
             held = np.isin(identity, held_people)

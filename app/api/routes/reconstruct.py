@@ -3,13 +3,15 @@
 The union of the operands (as ``/v1/union`` computes it) is read as a complete body's spectrum
 and decoded to that body in the rest pose, on the template's topology (the decoder in
 ``models/reconstruction.onnx``: a linear shape basis and two networks, see the model card). The
-union's σ goes with it: one operand is a measured spectrum (σ = 0), read by the network trained
-on measured spectra; a union of several is a prediction, read by the one that learned the
-operator's error. The loop is closed on the spectrum: the rebuilt body goes through the same
-solver workers as an upload, and its own spectrum comes back beside the one it was decoded
-from, so a client sees how far to trust it. A union of parts that do not cover the body is
-decoded all the same (it is a smaller body's spectrum to the decoder); the gap between the two
-spectra shows it.
+union's σ goes with it: one operand of a closed surface is a measured complete body (σ = 0),
+read by the network trained on such spectra; a union of several is a prediction, and one operand
+with a boundary (a partial scan, or a whole-body scan with blind spots: λ₁ > 0) no complete
+body, and both are read by the network that learned the operator's error, partial unions and
+blind spots (the graph routes each row itself). The loop is closed on the spectrum: the rebuilt
+body goes through the same solver workers as an upload, and its own spectrum comes back beside
+the one it was decoded from, so a client sees how far to trust it. A union of parts that do not
+cover the body is decoded all the same (the network's best guess of the person); the gap
+between the two spectra shows it.
 """
 
 import time
