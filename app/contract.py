@@ -22,6 +22,10 @@ RECONSTRUCTION_FILE = "reconstruction.onnx"  # optional: served when present (PO
 # float32 (batch, k) each, 1/m²: a complete body's spectrum and its σ (all 0: a measured spectrum, not a union)
 RECONSTRUCTION_INPUTS = ("spectrum", "sigma")
 RECONSTRUCTION_OUTPUTS = ("vertices",)  # float32 (batch, template vertices, 3): its rest-pose body, metres
+# λ₁/λ₂ above which a spectrum is of a surface with a boundary (a closed body's λ₁ is 0): the
+# decoder's graph reads such a measured spectrum as a scan, and /v1/reconstruct judges its round
+# trip as an open surface's (figures in training/reconstruction/decoder.py)
+BOUNDARY_RATIO = 0.01
 MASK_THRESHOLD = 0.5  # a template vertex is in the region when the localizer's probability reaches this
 INTERVAL_Z = 1.6449  # σ is calibrated so that union ± INTERVAL_Z·σ holds 90 % of held-out eigenvalues
 

@@ -148,6 +148,8 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
     )
     note = browser.find_element(By.ID, "rebuilt-note")
     assert note.get_attribute("data-height") == f"{float(rebuilt.headers['x-height-m']):.4f}"
+    assert note.get_attribute("data-round-trip") == rebuilt.headers["x-round-trip"]  # the service's verdict shown
+    assert rebuilt.headers["x-round-trip"] in {"closed", "open", "unseen"}
     assert _drawn_share(browser.find_element(By.ID, "rebuilt")) > 0.03  # the rebuilt body is drawn
 
     if os.environ.get("SESSION_SCREENSHOT"):

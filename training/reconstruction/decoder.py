@@ -25,11 +25,12 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from app.contract import BOUNDARY_RATIO
+
 FLOOR = 1e-6  # 1/m²: below any body's λ₂ (~0.5), keeps a union's near-zero λ₂ finite in log space
-# λ₁/λ₂ above which a spectrum is a surface with a boundary. A closed body's λ₁ is 0 up to the
-# solver (λ₁/λ₂ ≤ 3e-13 over the data set's 628 complete bodies); the benchmark's partial unions
-# measure ≥ 0.085, and a hole of 0.2 % of the template's area (a scanner's blind spot) 0.16.
-BOUNDARY_RATIO = 0.01
+# BOUNDARY_RATIO: a closed body's λ₁ is 0 up to the solver (λ₁/λ₂ ≤ 3e-13 over the data set's
+# 628 complete bodies); the benchmark's partial unions measure ≥ 0.085, and a hole of 0.2 % of
+# the template's area (a scanner's blind spot) 0.16.
 
 
 @dataclass(frozen=True)

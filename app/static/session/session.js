@@ -179,11 +179,16 @@ async function showRebuilt(response) {
   rebuiltView.show(await response.arrayBuffer());
   const height = Number(response.headers.get("x-height-m"));
   const gap = Number(response.headers.get("x-spectrum-relative-error"));
+  const verdict = response.headers.get("x-round-trip"); // the service's judgement: closed, open or unseen
   const note = $("rebuilt-note");
   note.dataset.height = height.toFixed(4);
+  note.dataset.roundTrip = verdict;
   note.textContent = `Height ${(100 * height).toFixed(1)} cm; its own spectrum is ${(100 * gap).toFixed(1)} % from the union's`
-    + (gap > 0.1 ? ": not a complete body's spectrum yet, do not trust this body." : ".");
-  note.classList.toggle("warning", gap > 0.1);
+    + ({
+      open: ", as expected of a scan with holes (the soles, the top of the head): the body is the closed one it belongs to.",
+      unseen: ": not a complete body's spectrum yet, do not trust this body.",
+    }[verdict] ?? ".");
+  note.classList.toggle("warning", verdict === "unseen");
 }
 
 function showCoverage(region) {

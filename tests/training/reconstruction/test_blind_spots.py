@@ -4,14 +4,12 @@ import numpy as np
 import pytest
 import trimesh
 
+from app.contract import BOUNDARY_RATIO
 from app.core.config import Settings
 from app.inference.template import Template
 from training.data.spectra import MESH, task_spectrum
 from training.reconstruction.blind_spots import blind_spot_mask
 from training.reconstruction.unions import SCAN_KINDS, scan_spectra
-
-pytest.importorskip("torch")
-from training.reconstruction.decoder import BOUNDARY_RATIO  # noqa: E402
 
 
 @pytest.fixture(scope="module")
