@@ -110,7 +110,7 @@ def render(metrics: dict, command: str) -> str:
         BEGIN,
         f"Produced by `{command}`.",
         "",
-        "| queries | n (identities) | decoder mean / p95 vertex mm | height mm | area | spectrum round trip "
+        "| queries | n (identities) | decoder mean / p95 vertex mm | height mm | area | spectrum round trip (p5–p95) "
         "| mean body mean / p95 mm | nearest identity mean / p95 mm |",
         "|---|---|---|---|---|---|---|---|",
     ]
@@ -119,7 +119,8 @@ def render(metrics: dict, command: str) -> str:
         lines.append(
             f"| {name} | {row['queries']} ({row['identities']}) | {ours['vertex_mean_mm']:.1f} / "
             f"{ours['vertex_p95_mm']:.1f} | {ours['height_mm']:.1f} | {100 * ours['area_relative']:.1f} % | "
-            f"{100 * ours['spectrum_mre']:.1f} % | {mean['vertex_mean_mm']:.1f} / {mean['vertex_p95_mm']:.1f} | "
+            f"{100 * ours['spectrum_mre']:.1f} % ({100 * ours['spectrum_p05']:.0f}–{100 * ours['spectrum_p95']:.0f}) | "
+            f"{mean['vertex_mean_mm']:.1f} / {mean['vertex_p95_mm']:.1f} | "
             f"{nearest['vertex_mean_mm']:.1f} / {nearest['vertex_p95_mm']:.1f} |"
         )
     lines += ["", "Baselines' height / area errors:", ""]

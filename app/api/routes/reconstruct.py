@@ -43,8 +43,9 @@ VERTEX_DECIMALS = 5  # 10 µm: far below the decoder's error, and it keeps the J
 # on average (model card); a union of scans that leave part of the body unseen is ~80 % away.
 GAP_WARNING = 0.10
 # An open surface (λ₁ > 0) never comes back as the closed body's spectrum: unknown people's
-# complete scans with blind spots come back 13–45 % away (5th–95th percentile) and decode to
-# ~9–28 mm, a session's five views that miss a quarter of the body 69–88 % (and ~75 mm).
+# complete scans with blind spots come back 11–45 % away (5th–95th percentile, the card's
+# blind_spots row) and decode to ~9–28 mm, a session's five views that miss a quarter of the
+# body 69–91 % (session_spectrum; ~75 mm), predicted two-part unions 1–17 %.
 OPEN_GAP_WARNING = 0.60
 
 
@@ -63,7 +64,7 @@ class ReconstructResponse(UnionResponse):
         "(λ₁ of a closed body is 0): the decoder's own check, 1.3 % on complete bodies' spectra and 4.8 % on "
         "two-part unions on average (model card); over 10 % adds a warning. An open surface's spectrum (λ₁ > 0: "
         "a scan with holes) cannot come back as a closed body's: up to 60 % it adds a note (complete scans with "
-        "blind spots come back 13–45 % away), over 60 % the warning (a large part of the body unseen)."
+        "blind spots come back 11–45 % away), over 60 % the warning (a large part of the body unseen)."
     )
 
 
