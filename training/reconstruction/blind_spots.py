@@ -12,12 +12,12 @@ unknown people's posed bodies test it.
 """
 
 from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from training.data.spectra import MESH, task_spectrum
+from training.data.workers import mapped
 from training.learning.data import SpectralData
 
 SOLE_HEIGHT = (0.005, 0.03)  # m above the lowest vertex: the soles and the floor's shadow
@@ -56,10 +56,9 @@ def blind_spot_mask(vertices: np.ndarray, rng: np.random.Generator) -> np.ndarra
             return seen
 
 
-def _solve(shapes: Path, shape: int, faces: np.ndarray, mask: np.ndarray, k: int) -> np.ndarray:
-    vertices = np.asarray(np.load(shapes, mmap_mode="r")[shape], dtype=np.float64)
-    with threadpool_limits(limits=1):  # one solve per worker process
-        return task_spectrum(vertices, faces, mask, MESH, k)
+@threadpool_limits.wrap(limits=1)  # one solve per worker process
+def _solve(shapes: str, shape: int, faces: np.ndarray, mask: np.ndarray, k: int) -> np.ndarray:
+    return task_spectrum(np.asarray(mapped(shapes)[shape], dtype=np.float64), faces, mask, MESH, k)
 
 
 def scans_of_shapes(
@@ -67,7 +66,7 @@ def scans_of_shapes(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(spectra (m, k), shape (m,)) of each posed shape of the build seen through its mask (one
     per shape), rows that could not be solved left out."""
-    faces, posed = data.template.faces, data.root / "work" / "shapes.npy"
+    faces, posed = data.template.faces, str(data.root / "work" / "shapes.npy")
     with ProcessPoolExecutor(workers) as pool:
         jobs = [pool.submit(_solve, posed, shape, faces, mask, k) for shape, mask in zip(shapes, masks, strict=True)]
         spectra = np.stack([job.result() for job in jobs])

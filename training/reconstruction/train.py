@@ -151,9 +151,9 @@ def train_decoder(
     benchmark identities (a tenth of them; predicted full-body ones and true partial ones), and
     the held-out bodies' scans of each kind, each set checked on its own; the epoch kept has the
     lowest mean of those vertex errors (on true spectra alone it kept a network that never
-    learned the union's error: 16 mm from two-part unions instead of 12). The network for measured spectra trains and is
-    validated on the true spectra alone. ``checkpoint`` is the first's; the second's is beside
-    it (``-measured``).
+    learned the union's error: 16 mm from two-part unions instead of 12). The network for
+    measured spectra trains and is validated on the true spectra alone. ``checkpoint`` is the
+    first's; the second's is beside it (``-measured``).
     """
     generator = seed_everything(settings.seed)
     arrays = np.load(bodies_dir / BODIES_FILE)
