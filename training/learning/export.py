@@ -13,6 +13,7 @@ import numpy as np
 import onnx
 import onnxruntime as ort
 import torch
+from onnx import numpy_helper
 
 from app.contract import (
     LOCALIZER_INPUTS,
@@ -88,6 +89,14 @@ def export_localizer(model: Localizer, path: Path) -> None:
 def export_decoder(model: SpectrumDecoder, path: Path) -> None:
     example = torch.linspace(0, 60, model.config.k).repeat(2, 1)
     _export(model, (example, 0.1 * example), path, RECONSTRUCTION_INPUTS, RECONSTRUCTION_OUTPUTS)
+
+
+def decoder_basis(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(3V,) mean body and (C, 3V) components times their spread, read back from an exported decoder
+    graph (:class:`SpectrumDecoder`'s buffers): the shape basis its whitened coefficients multiply,
+    for benchmarks that work in it."""
+    arrays = {tensor.name: numpy_helper.to_array(tensor) for tensor in onnx.load(str(path)).graph.initializer}
+    return arrays["mean"].astype(np.float64), arrays["components"].astype(np.float64)
 
 
 def session(path: Path) -> ort.InferenceSession:
