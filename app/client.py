@@ -161,13 +161,15 @@ class Client:
         spectra: Sequence[Sequence[float]] = (),
         *,
         top: int = 10,
+        rebuild: bool = True,
         units: Units = "m",
         scale: float | None = None,
         overlap: Sequence[float] | None = None,
         measure_overlap: bool = False,
     ) -> RetrieveResponse:
-        """The stored complete shapes nearest to the union of the operands."""
-        params = {"top": top, **_union_params(units, scale, overlap, measure_overlap)}
+        """The stored complete shapes nearest to the union of the operands; an open surface (a scan with
+        holes) is ranked through the body the shape decoder rebuilds from it unless ``rebuild`` is False."""
+        params = {"top": top, "rebuild": rebuild, **_union_params(units, scale, overlap, measure_overlap)}
         return RetrieveResponse(**self._operands("/v1/retrieve", files, spectra, params))
 
     def models(self) -> ModelsResponse:

@@ -21,7 +21,6 @@ before and after the fit.
 """
 
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -29,33 +28,12 @@ from app.contract import RECONSTRUCTION_FILE
 from app.inference.body import spectrum_gap
 from app.inference.models import SpectralModels
 from training.benchmark_arguments import benchmark_parser
-from training.data.spectra import MESH
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
 from training.learning.export import decoder_basis
-from training.reconstruction.evaluate import UNKNOWN_GROUPS, body_scores, closed_spectrum, identity_groups
+from training.reconstruction.evaluate import body_scores, closed_spectrum, query_sets
 from training.reconstruction.spectral_fit import CotangentSpectrum, fitted
 from training.reconstruction.train import data_set_rest_bodies
-
-
-def query_sets(data: SpectralData, models: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """The card's sets (a) and (b): spectra, σ and the identity of each query."""
-    unknown = np.flatnonzero(np.isin(identity_groups(data), UNKNOWN_GROUPS))
-    shapes, spectra = data.complete_spectra()
-    keep = np.isin(data.identity_of(shapes), unknown)
-    pairs = data.pairs
-    full = pairs.rows(
-        np.flatnonzero(
-            (pairs.split == "test_a") & (pairs.scenario == "full") & (pairs.variant == MESH)
-            & np.isin(pairs.group, UNKNOWN_GROUPS)
-        )
-    )  # fmt: skip
-    union, sigma = served_predictors(models)[0](full.a, full.b)
-    measured = spectra[keep].astype(np.float64)
-    return {
-        "true spectrum": (measured, np.zeros_like(measured), data.identity_of(shapes[keep])),
-        "two-part union": (union.astype(np.float64), sigma.astype(np.float64), data.identity_of(full.shape_a)),
-    }
 
 
 def main() -> None:
@@ -66,7 +44,8 @@ def main() -> None:
     faces, rest = data.template.faces, data_set_rest_bodies(data).astype(np.float64)
     models = SpectralModels(args.models)
     basis, spectrum = decoder_basis(args.models / RECONSTRUCTION_FILE), CotangentSpectrum(faces, models.k)
-    sets = query_sets(data, args.models)
+    every = query_sets(data, served_predictors(args.models)[0])
+    sets = {"true spectrum": every["true_spectrum"], "two-part union": every["two_part_union"]}
     people = np.unique(np.concatenate([identity for _, _, identity in sets.values()]))
     true_spectra = {p: closed_spectrum(rest[p], faces, models.k) for p in people}
     rng = np.random.default_rng(0)

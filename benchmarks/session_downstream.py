@@ -8,18 +8,25 @@ spectra: the served operator's chained union untold (the model card's ``session_
 the chain told each step's true overlap, and the true spectrum of the five views' union itself
 (σ 0). Localization: symmetric area IoU and per-part coverage error against the union's true
 region, as the card scores them; decoding: vertex error against the person's rest-pose body
-after rigid alignment. Where the true union does no better, what limits the row is not the
-union operator's error.
+after rigid alignment; identity: the person among the service's seed database of complete
+shapes (``models/shapes.npz``), ranked as ``/v1/retrieve`` ranks (an open surface through the
+closed spectrum of the body rebuilt from it), the session's own posed body left out, top-1/5/10
+as the card's retrieval table counts them. Where the true union does no
+better, what limits the row is not the union operator's error.
 """
+
+from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
+from app.inference.body import open_surface
 from app.inference.models import SpectralModels, chained_sigma
 from training.benchmark_arguments import benchmark_parser
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors, served_told_predictor
 from training.learning.masks import SERVED_LOCALIZER, symmetric_scores
-from training.reconstruction.evaluate import body_scores
+from training.learning.shapedna import hit_rates
+from training.reconstruction.evaluate import body_scores, closed_spectrum
 from training.reconstruction.train import data_set_rest_bodies
 
 
@@ -54,16 +61,30 @@ def main() -> None:
     region = localizers[SERVED_LOCALIZER]
     template = data.template
     true_region = data.masks(chains.union_masks[:, -1])
-    print("| from | IoU | coverage error (points) | vertex mean mm | vertex p95 mm | height error mm | area error |")
-    print("|---|---|---|---|---|---|---|")
+    stored = np.load(args.models / "shapes.npz")["spectra"]
+    stored_identity = np.arange(len(stored)) // data.shapes_per_identity
+    person = data.identity_of(chains.shape)
+    print(
+        "| from | IoU | coverage error (points) | vertex mean mm | vertex p95 mm | height error mm | area error "
+        "| identity top-1 / 5 / 10 |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
     for name, (spectra, sigma) in answers.items():
         located = symmetric_scores(region(spectra), true_region, data.vertex_area, template.mirror, template.labels)
         bodies = np.stack([models.reconstruct(s, g) for s, g in zip(spectra, sigma, strict=True)])
         score = body_scores(bodies, truth, template.faces)
+        with ProcessPoolExecutor() as pool:
+            rebuilt = np.stack(
+                list(pool.map(closed_spectrum, bodies, [template.faces] * len(bodies), [models.k] * len(bodies)))
+            )
+        ranked = np.where(open_surface(spectra)[:, None], rebuilt, spectra)
+        found = hit_rates(ranked, person, chains.shape, stored, stored_identity)
         print(
             f"| {name} | {100 * located.iou.mean():.1f} % | {100 * located.coverage_error.mean():.1f} | "
             f"{score['vertex_mean_mm']:.0f} | {score['vertex_p95_mm']:.0f} | {score['height_mm']:.0f} | "
-            f"{100 * score['area_relative']:.0f} % |"
+            f"{100 * score['area_relative']:.0f} % | "
+            + " / ".join(f"{100 * rate:.1f}" for rate in found.values())
+            + " % |"
         )
 
 

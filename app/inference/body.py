@@ -2,6 +2,8 @@
 
 import numpy as np
 
+from app.contract import BOUNDARY_RATIO
+
 UP_AXIS = 2  # the template's up axis (z): anny's rest pose stands along it
 
 
@@ -20,3 +22,9 @@ def spectrum_gap(body: np.ndarray, target: np.ndarray) -> float:
     """Mean relative difference of λ₂…λ_k between a rebuilt body's spectrum and the spectrum it
     was decoded from: λ₁ of a closed body is 0, where a relative difference means nothing."""
     return float(np.mean(np.abs(body[1:] - target[1:]) / np.maximum(np.abs(target[1:]), 1e-12)))
+
+
+def open_surface(eigenvalues: np.ndarray) -> np.ndarray:
+    """Whether spectra (..., k) are an open surface's (λ₁ > ``BOUNDARY_RATIO`` · λ₂: a boundary, such
+    as a scan's holes), not a closed body's (λ₁ = 0 up to the solver): the decoder graph's router's rule."""
+    return eigenvalues[..., 0] > BOUNDARY_RATIO * eigenvalues[..., 1]

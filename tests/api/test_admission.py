@@ -138,19 +138,21 @@ def test_a_body_that_stalls_is_answered_408_and_its_place_is_freed(server):
         _release(server, holders)
 
 
-def test_a_reconstruction_is_counted_in_even_with_url_encoded_spectra(server):
-    """/v1/reconstruct solves the body it rebuilt whatever its body holds: with every place taken
-    it is refused on its headers, while a spectra-only union (no solve) still passes."""
-    spectra = {"spectra": json.dumps([np.cumsum(np.linspace(0, 4, 20)).tolist()])}
+@pytest.mark.parametrize("route", ["/v1/reconstruct", "/v1/retrieve"])
+def test_a_route_that_may_solve_is_counted_in_even_with_url_encoded_spectra(server, route):
+    """/v1/reconstruct solves the body it rebuilt whatever its body holds, /v1/retrieve the body
+    rebuilt from an open surface (this spectrum's λ₁ > 0): with every place taken each is refused
+    on its headers, while a spectra-only union (no solve) still passes."""
+    spectra = {"spectra": json.dumps([np.cumsum(np.linspace(0.5, 4, 20)).tolist()])}  # λ₁ = 0.5, λ₂ = 1.2: open
     holders = _held(server, CAPACITY)
     try:
         before = _solves(server)
-        refused = httpx.post(f"http://127.0.0.1:{server}/v1/reconstruct", data=spectra, timeout=30)
+        refused = httpx.post(f"http://127.0.0.1:{server}{route}", data=spectra, timeout=30)
         assert refused.status_code == 503 and refused.json()["type"] == "/problems/overloaded", refused.text
         assert httpx.post(f"http://127.0.0.1:{server}/v1/union", data=spectra, timeout=30).status_code == 200
         assert _solves(server) == before
     finally:
         _release(server, holders)
-    answered = httpx.post(f"http://127.0.0.1:{server}/v1/reconstruct", data=spectra, timeout=60)
+    answered = httpx.post(f"http://127.0.0.1:{server}{route}", data=spectra, timeout=60)
     assert answered.status_code == 200, answered.text
     assert _solves(server) == before + 1

@@ -15,7 +15,7 @@ import pytest
 import trimesh
 from fastapi.testclient import TestClient
 
-from app.api.routes.reconstruct import GAP_WARNING, OPEN_GAP_WARNING
+from app.api.rebuilt import GAP_WARNING, OPEN_GAP_WARNING
 from app.contract import BOUNDARY_RATIO, RECONSTRUCTION_FILE
 from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum

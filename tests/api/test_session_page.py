@@ -143,6 +143,14 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
     greyish = ((np.ptp(pixels, axis=1) < 12) & (pixels[:, 0] < 225) & (pixels[:, 0] > 60)).mean()
     assert reddish > 0.02 and greyish > 0.001  # covered and missing, in their two colours
     assert len(browser.find_elements(By.CSS_SELECTOR, "#matches li")) == 5
+    found = httpx.post(
+        f"{base}/v1/retrieve", params={"top": 5}, data={"spectra": _session_spectra(base, scans)}, timeout=60
+    )
+    shown = [item.text.split(" (")[0] for item in browser.find_elements(By.CSS_SELECTOR, "#matches li")]
+    assert shown == [match["label"] for match in found.json()["matches"]]  # the service's ranking, as it ranked
+    matches_note = browser.find_element(By.ID, "matches-note")
+    assert matches_note.get_attribute("data-ranked-by") == found.json()["ranked_by"]
+    assert matches_note.text == " ".join(found.json()["warnings"])
     rebuilt = httpx.post(
         f"{base}/v1/reconstruct", params={"format": "ply"}, data={"spectra": _session_spectra(base, scans)}, timeout=60
     )

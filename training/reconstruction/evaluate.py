@@ -87,6 +87,17 @@ def identity_groups(data: SpectralData) -> np.ndarray:
     return np.array([i["group"] for i in json.loads((data.root / "work" / "identities.json").read_text())])
 
 
+def chained_union(views: np.ndarray, union: Union) -> tuple[np.ndarray, np.ndarray]:
+    """(spectra, σ) of the union of each row's views (rows, views, k), folded left to right with σ
+    carried as the service carries it (:func:`app.inference.models.chained_sigma`)."""
+    current, sigma = views[:, 0], np.zeros_like(views[:, 0])
+    for view in range(1, views.shape[1]):
+        step, step_sigma = union(current, views[:, view])
+        sigma = chained_sigma(current, sigma, step, step_sigma)
+        current = step
+    return current, sigma
+
+
 def query_sets(data: SpectralData, union: Union) -> dict[str, Queries]:
     """The queries of each set (a), (b), (c) of the module docstring."""
     unknown = np.flatnonzero(np.isin(identity_groups(data), UNKNOWN_GROUPS))
@@ -103,12 +114,7 @@ def query_sets(data: SpectralData, union: Union) -> dict[str, Queries]:
     )  # fmt: skip
     sets["two_part_union"] = (*union(chosen.a, chosen.b), data.identity_of(chosen.shape_a))
     chains = data.chains
-    current, sigma = chains.views[:, 0], np.zeros_like(chains.views[:, 0])
-    for view in range(1, chains.views.shape[1]):
-        step, step_sigma = union(current, chains.views[:, view])
-        sigma = chained_sigma(current, sigma, step, step_sigma)
-        current = step
-    sets["session_chain"] = (current, sigma, data.identity_of(chains.shape))
+    sets["session_chain"] = (*chained_union(chains.views, union), data.identity_of(chains.shape))
     exact = chains.unions[:, -1].astype(np.float64)
     sets["session_spectrum"] = (exact, np.zeros_like(exact), data.identity_of(chains.shape))
     scans, scanned = blind_spot_spectra(data, shapes[keep], 1, BLIND_SPOT_SEED, spectra.shape[1])

@@ -14,39 +14,24 @@ cover the body is decoded all the same (the network's best guess of the person);
 between the two spectra shows it.
 """
 
-import time
 from typing import Annotated, Literal
 
-import anyio
 import numpy as np
-import trimesh
 from fastapi import APIRouter, Query, Request, Response
 from pydantic import Field
 
 from app.api.deps import ModelsDep, SettingsDep
 from app.api.examples import success
-from app.api.metrics import INFERENCE
 from app.api.operands import FilesField, MeasureOverlapQuery, OverlapQuery, ScaleQuery, SpectraField, UnitsQuery
 from app.api.problems import ProblemError, problem_responses
+from app.api.rebuilt import RoundTrip, rebuilt_body
 from app.api.routes.unions import UNION_PROBLEMS, UnionResponse
-from app.api.solver import SolverPool
 from app.api.unions import union_of_operands
-from app.contract import BOUNDARY_RATIO
-from app.geometry.pipeline import SpectrumOptions
-from app.inference.body import body_height, spectrum_gap, surface_area
-from app.inference.models import SpectralModels
+from app.inference.body import body_height, surface_area
 
 router = APIRouter(tags=["unions"])
 ROUTE = "/reconstruct"  # every request solves the body it rebuilt: admitted like an upload (app.main)
 VERTEX_DECIMALS = 5  # 10 µm: far below the decoder's error, and it keeps the JSON small
-# The rebuilt body's spectrum is within ~2 % of a complete body's and ~5 % of a two-part union's
-# on average (model card); a union of scans that leave part of the body unseen is ~80 % away.
-GAP_WARNING = 0.10
-# An open surface (λ₁ > 0) never comes back as the closed body's spectrum: unknown people's
-# complete scans with blind spots come back 11–45 % away (5th–95th percentile, the card's
-# blind_spots row) and decode to ~9–28 mm, a session's five views that miss a quarter of the
-# body 69–91 % (session_spectrum; ~75 mm), predicted two-part unions 1–17 %.
-OPEN_GAP_WARNING = 0.60
 
 
 class ReconstructResponse(UnionResponse):
@@ -68,19 +53,6 @@ class ReconstructResponse(UnionResponse):
     )
 
 
-RoundTrip = Literal["closed", "open", "unseen"]
-
-
-def round_trip(gap: float, union: np.ndarray) -> RoundTrip:
-    """What the round trip says of the rebuilt body: ``closed``, the union's spectrum came back;
-    ``open``, an open surface's (λ₁ > 0) came back as a complete scan with blind spots does;
-    ``unseen``, the gap says a large part of the body is not in the union: not to be trusted."""
-    open_surface = bool(union[0] > BOUNDARY_RATIO * union[1])
-    if gap > (OPEN_GAP_WARNING if open_surface else GAP_WARNING):
-        return "unseen"
-    return "open" if open_surface and gap > GAP_WARNING else "closed"
-
-
 def round_trip_warnings(verdict: RoundTrip, gap: float) -> list[str]:
     """The response's words for a round trip's verdict."""
     if verdict == "unseen":
@@ -95,11 +67,6 @@ def round_trip_warnings(verdict: RoundTrip, gap: float) -> list[str]:
             "complete scan with blind spots comes back (model card: such scans decode to ~9–28 mm)"
         ]
     return []
-
-
-def body_mesh(models: SpectralModels, vertices: np.ndarray) -> bytes:
-    """Binary PLY of a rebuilt body (the template's faces)."""
-    return trimesh.Trimesh(vertices, models.template.faces, process=False).export(file_type="ply")
 
 
 @router.post(
@@ -135,31 +102,23 @@ async def reconstruct(
             501, "reconstruction-unavailable", "Reconstruction unavailable", "these models have no shape decoder"
         )
     outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, overlap, measure_overlap)
-    started = time.perf_counter()
-    vertices = await anyio.to_thread.run_sync(models.reconstruct, outcome.result.eigenvalues, outcome.result.sigma)
-    INFERENCE.labels("decoder").observe(time.perf_counter() - started)
-    mesh = await anyio.to_thread.run_sync(body_mesh, models, vertices)
-    solver: SolverPool = request.app.state.solver
-    report = await solver.solve(mesh, "ply", SpectrumOptions(k=models.k))
-    body_spectrum = np.asarray(report.eigenvalues, dtype=np.float64)
-    height, area = body_height(vertices), surface_area(vertices, models.template.faces)
-    gap = spectrum_gap(body_spectrum, outcome.result.eigenvalues)
-    verdict = round_trip(gap, outcome.result.eigenvalues)
-    warnings = [*outcome.warnings, *round_trip_warnings(verdict, gap)]
+    body = await rebuilt_body(request, models, outcome.result)
+    height, area = body_height(body.vertices), surface_area(body.vertices, models.template.faces)
+    warnings = [*outcome.warnings, *round_trip_warnings(body.verdict, body.gap)]
     if format == "ply":
         headers = {
             "content-disposition": "inline; filename=body.ply",
             "x-height-m": f"{height:.4f}",
             "x-area-m2": f"{area:.4f}",
-            "x-spectrum-relative-error": f"{gap:.4f}",
-            "x-round-trip": verdict,
+            "x-spectrum-relative-error": f"{body.gap:.4f}",
+            "x-round-trip": body.verdict,
         }
-        return Response(mesh, media_type="application/ply", headers=headers)
+        return Response(body.mesh, media_type="application/ply", headers=headers)
     return ReconstructResponse(
         **(outcome.fields(models) | {"warnings": warnings}),
         height_m=height,
         area_m2=area,
-        vertices=np.round(vertices, VERTEX_DECIMALS).tolist(),
-        body_eigenvalues=body_spectrum.tolist(),
-        spectrum_relative_error=gap,
+        vertices=np.round(body.vertices, VERTEX_DECIMALS).tolist(),
+        body_eigenvalues=body.eigenvalues.tolist(),
+        spectrum_relative_error=body.gap,
     )

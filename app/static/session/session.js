@@ -207,6 +207,11 @@ function showCoverage(region) {
 }
 
 function showMatches(found) {
+  // How the service ranked (the union, or the body rebuilt from an open one) and what it means.
+  const note = $("matches-note");
+  note.dataset.rankedBy = found.ranked_by;
+  note.textContent = found.warnings.join(" ");
+  note.classList.toggle("warning", found.warnings.some((warning) => warning.includes("not an identification")));
   $("matches").replaceChildren(
     ...found.matches.map((match) => {
       const li = document.createElement("li");

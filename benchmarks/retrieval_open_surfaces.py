@@ -1,0 +1,119 @@
+"""Identity from an open surface: its own spectrum against the spectrum of the body rebuilt from it.
+
+    python benchmarks/retrieval_open_surfaces.py [--data data/standard] [--models models]
+
+The store holds complete shapes' closed spectra (ShapeDNA, λ₁ = 0). A scan with holes — a whole
+body scanned standing, which misses its soles, the top of its head, an armpit — has a boundary,
+and its Dirichlet spectrum is another kind of spectrum: λ₁ > 0 and every eigenvalue raised, so
+the nearest stored shapes are the smallest bodies, whoever was scanned. ``/v1/retrieve`` ranks
+such a query (λ₁ above ``BOUNDARY_RATIO`` · λ₂) through the body the shape decoder rebuilds
+from it: the rebuilt body's own closed spectrum, solved by the engine, against the same store.
+
+Queries against the service's seed database (``models/shapes.npz``), each query's own posed
+shape left out, top-1/5/10 as the card counts: (a) every third complete posed body of the
+benchmark scanned with blind spots (``training.reconstruction.blind_spots``, the card's seed,
+σ = 0), also for its unknown people alone; (b) the card's retrieval queries (predicted unions of
+two parts covering the body), the open ones alone and all of them as the service now ranks them
+(closed as before); (c) Test A partial unions (predicted); (d) Test C sessions of five views,
+chained untold. Prints a Markdown table.
+"""
+
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+from app.inference.body import open_surface
+from app.inference.models import SpectralModels
+from training.benchmark_arguments import benchmark_parser
+from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION
+from training.data.spectra import MESH
+from training.learning.data import SpectralData
+from training.learning.evaluate import served_predictors
+from training.learning.shapedna import TOP, hit_rates
+from training.reconstruction.blind_spots import blind_spot_spectra
+from training.reconstruction.evaluate import (
+    BLIND_SPOT_SEED,
+    UNKNOWN_GROUPS,
+    chained_union,
+    closed_spectrum,
+    identity_groups,
+)
+
+PARTIAL_ROWS = 150  # Test A partial unions scored: enough for a rate to ±4 points
+EVERY = 3  # every third stored shape scanned with blind spots
+
+
+def rebuilt_spectra(models: SpectralModels, spectra: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """(n, k) the closed spectrum of the body the served decoder rebuilds from each row."""
+    bodies = [models.reconstruct(s, z) for s, z in zip(spectra, sigma, strict=True)]
+    faces = models.template.faces
+    with ProcessPoolExecutor() as pool:
+        return np.stack(list(pool.map(closed_spectrum, bodies, [faces] * len(bodies), [models.k] * len(bodies))))
+
+
+def main() -> None:
+    parser = benchmark_parser(__doc__, models=True)
+    args = parser.parse_args()
+    data = SpectralData(args.data)
+    models = SpectralModels(args.models)
+    stored = np.load(args.models / "shapes.npz")["spectra"]
+    identity = np.arange(len(stored)) // data.shapes_per_identity
+    unknown = np.isin(identity, np.flatnonzero(np.isin(identity_groups(data), UNKNOWN_GROUPS)))
+    union = served_predictors(args.models)[0]
+    pairs = data.pairs
+
+    scans, scanned = blind_spot_spectra(data, np.arange(0, len(stored), EVERY), 1, BLIND_SPOT_SEED, models.k)
+    full = pairs.rows(
+        np.flatnonzero((pairs.scenario == FULL_COVERAGE) & ~np.isin(pairs.split, ("train", "validation")))
+    )
+    full_union, full_sigma = union(full.a, full.b)
+    partial = pairs.rows(
+        np.flatnonzero((pairs.scenario == PARTIAL_UNION) & (pairs.split == "test_a") & (pairs.variant == MESH))[
+            :PARTIAL_ROWS
+        ]
+    )
+    chains = data.chains
+    session, session_sigma = chained_union(chains.views, union)
+    opened = open_surface(full_union)
+    kinds = {
+        "complete scans with blind spots": (scans, np.zeros_like(scans), scanned),
+        "… of people never trained on": (
+            scans[unknown[scanned]],
+            np.zeros_like(scans[unknown[scanned]]),
+            scanned[unknown[scanned]],
+        ),
+        "two-part unions covering the body, the open ones": (
+            full_union[opened],
+            full_sigma[opened],
+            full.shape_a[opened],
+        ),
+        "Test A partial unions": (*union(partial.a, partial.b), partial.shape_a),
+        "Test C sessions of 5 views": (session, session_sigma, chains.shape),
+    }
+    print("| queries | n | open (λ₁ > 1 % λ₂) | own spectrum top-1 / 5 / 10 | rebuilt body's spectrum top-1 / 5 / 10 |")
+    print("|---|---|---|---|---|")
+
+    def rates(spectra: np.ndarray, shapes: np.ndarray) -> str:
+        found = hit_rates(spectra, identity[shapes], shapes, stored, identity)
+        return " / ".join(f"{100 * found[f'top{t}']:.1f}" for t in TOP) + " %"
+
+    rebuilt_full = None
+    for name, (spectra, sigma, shapes) in kinds.items():
+        spectra, sigma = np.asarray(spectra, np.float64), np.asarray(sigma, np.float64)
+        rebuilt = rebuilt_spectra(models, spectra, sigma)
+        if name.startswith("two-part"):
+            rebuilt_full = rebuilt
+        print(
+            f"| {name} | {len(spectra)} | {100 * open_surface(spectra).mean():.0f} % | {rates(spectra, shapes)} "
+            f"| {rates(rebuilt, shapes)} |"
+        )
+    served = full_union.astype(np.float64)
+    served[opened] = rebuilt_full
+    print(
+        f"| two-part unions covering the body, all (the card's queries), as ranked now | {len(full)} "
+        f"| {100 * opened.mean():.0f} % | {rates(full_union, full.shape_a)} | {rates(served, full.shape_a)} |"
+    )
+
+
+if __name__ == "__main__":
+    main()

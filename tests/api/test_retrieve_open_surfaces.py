@@ -1,0 +1,106 @@
+"""``/v1/retrieve`` on an open surface: ranked through the body rebuilt from it, not by its own spectrum.
+
+The independent truth: the template body stored beside the seed database's 630 people. Scanned
+without its soles it is still the template, but its spectrum is an open surface's (λ₁ > 0, every
+eigenvalue raised), and ranked as it is the nearest stored shapes are the smallest bodies.
+"""
+
+import io
+import json
+import shutil
+
+import numpy as np
+import pytest
+import trimesh
+from fastapi.testclient import TestClient
+
+from app.contract import BOUNDARY_RATIO, RECONSTRUCTION_FILE
+from app.core.config import Settings
+from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
+from app.geometry.shapes import Mesh
+from app.geometry.topology import drop_unreferenced
+from app.inference.manifest import write_manifest
+from app.inference.template import PART_NAMES, Template
+from app.main import create_app
+from tests.api.conftest import API_KEY, settings_for
+from tests.api.test_union_api import LEGS
+from training.reconstruction.blind_spots import above_soles
+
+LABEL = "the-template"
+
+
+@pytest.fixture(scope="module")
+def template() -> Template:
+    return Template.load(Settings().models_dir)
+
+
+@pytest.fixture(scope="module")
+def stored(client, template) -> dict:
+    """The closed template body, stored under its own label beside the seed people."""
+    ply = trimesh.Trimesh(template.vertices, template.faces, process=False).export(file_type="ply")
+    files = {"file": ("template.ply", io.BytesIO(ply), "application/octet-stream")}
+    response = client.post("/v1/shapes", data={"label": LABEL}, files=files, headers={"X-API-Key": API_KEY})
+    assert response.status_code == 201, response.text
+    return response.json()
+
+
+@pytest.fixture(scope="module")
+def without_soles(template) -> list[float]:
+    seen = above_soles(template.vertices, 0.015)
+    scan = Mesh(*drop_unreferenced(template.vertices, template.faces[seen[template.faces].all(axis=1)]))
+    spectrum = list(mesh_spectrum(scan, SpectrumOptions(k=20)).eigenvalues)
+    assert spectrum[0] > BOUNDARY_RATIO * spectrum[1]  # an open surface
+    return spectrum
+
+
+def retrieve(client, spectrum: list[float], **params) -> dict:
+    response = client.post("/v1/retrieve", params={"top": 5, **params}, data={"spectra": json.dumps([spectrum])})
+    assert response.status_code == 200, response.text
+    return response.json()
+
+
+def test_a_scan_without_its_soles_finds_its_body_through_the_rebuilt_one(client, stored, without_soles):
+    answer = retrieve(client, without_soles)
+    assert answer["ranked_by"] == "rebuilt_body"
+    assert answer["matches"][0]["label"] == LABEL
+    assert answer["query"] == pytest.approx(without_soles)
+    looked_up = np.array(answer["looked_up"])
+    assert abs(looked_up[0]) <= BOUNDARY_RATIO * looked_up[1]  # the rebuilt body is closed
+    assert any("rebuilds" in w for w in answer["warnings"])
+
+
+def test_ranked_by_its_own_spectrum_an_open_surface_finds_the_smallest_bodies(client, stored, without_soles):
+    answer = retrieve(client, without_soles, rebuild="false")
+    assert answer["ranked_by"] == "union" and answer["looked_up"] == pytest.approx(without_soles)
+    assert LABEL not in [match["label"] for match in answer["matches"]]
+    assert any("smallest bodies" in w for w in answer["warnings"])
+
+
+def test_a_closed_query_is_ranked_as_it_is(client, stored):
+    closed = stored["spectrum"]
+    answer = retrieve(client, closed)
+    assert answer["ranked_by"] == "union" and answer["looked_up"] == pytest.approx(closed)
+    assert answer["matches"][0]["label"] == LABEL and answer["matches"][0]["distance"] == pytest.approx(0, abs=1e-9)
+    assert answer["warnings"] == []
+
+
+def test_half_a_body_is_ranked_through_its_rebuilt_body_and_said_to_be_no_identification(client, stored, template):
+    """The legs cut away: the rebuilt body's spectrum comes back far from the query's (the round
+    trip's "unseen"), and the answer says its matches identify no one."""
+    legs = np.isin(template.labels, [PART_NAMES.index(p) for p in LEGS])
+    upper = Mesh(*drop_unreferenced(template.vertices, template.faces[~legs[template.faces].all(axis=1)]))
+    answer = retrieve(client, list(mesh_spectrum(upper, SpectrumOptions(k=20)).eigenvalues))
+    assert answer["ranked_by"] == "rebuilt_body"
+    assert any("not an identification" in w for w in answer["warnings"])
+
+
+def test_models_without_a_decoder_rank_an_open_surface_as_it_is_and_say_so(tmp_path, without_soles):
+    models = tmp_path / "models"
+    shutil.copytree(Settings().models_dir, models)
+    (models / RECONSTRUCTION_FILE).unlink()
+    write_manifest(models)
+    settings = settings_for(tmp_path / "shapes.sqlite").model_copy(update={"models_dir": models})
+    with TestClient(create_app(settings)) as other:
+        answer = retrieve(other, without_soles)
+    assert answer["ranked_by"] == "union" and answer["looked_up"] == pytest.approx(without_soles)
+    assert any("no shape decoder" in w for w in answer["warnings"])
