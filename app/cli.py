@@ -29,6 +29,9 @@ def spectrum(
     scale: Annotated[float | None, typer.Option(help="Factor to metres; overrides units.")] = None,
     closed: Annotated[bool, typer.Option(help="Point clouds: the cloud is closed.")] = False,
     boundary: Annotated[str | None, typer.Option(help="Point clouds: JSON list of boundary point indices.")] = None,
+    cap_holes: Annotated[
+        bool, typer.Option(help="Meshes: cap every boundary loop (a whole-body scan's blind spots).")
+    ] = False,
     file_type: Annotated[str | None, typer.Option(help="Overrides the extension.")] = None,
     pretty: Annotated[bool, typer.Option(help="Indented JSON instead of one line.")] = False,
     vectors: Annotated[
@@ -44,7 +47,7 @@ def spectrum(
     if units not in UNIT_TO_METRES:
         _fail(422, "invalid-request", "Invalid request", f"units: must be one of m, cm, mm, got {units!r}")
     try:
-        options = upload_options(get_settings(), k, units, scale, closed=closed, boundary=boundary)
+        options = upload_options(get_settings(), k, units, scale, closed=closed, boundary=boundary, cap_holes=cap_holes)
         solved = solve_bytes(file.read_bytes(), resolve_file_type(file.name, file_type), options, vectors=bool(vectors))
     except InputError as exc:
         _fail(status_for(exc), exc.slug, exc.title, str(exc))

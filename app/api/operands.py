@@ -53,6 +53,14 @@ OverlapQuery = Annotated[
 ]
 
 
+CapHolesQuery = Annotated[
+    bool,
+    Query(
+        description="Meshes: cap every boundary loop before the solve, not only pin-holes: a whole-body scan's "
+        "blind spots (soles, top of the head), for the closed surface's spectrum that stored complete shapes have. "
+        "Not for partial scans, whose boundary is what a union reads."
+    ),
+]
 MeasureOverlapQuery = Annotated[
     bool,
     Query(
@@ -102,6 +110,7 @@ def upload_options(
     *,
     closed: bool = False,
     boundary: str | None = None,
+    cap_holes: bool = False,
 ) -> SpectrumOptions:
     """Solve options for an uploaded shape under the service's caps (the API's and the CLI's);
     ``boundary`` is the JSON field of a point cloud's boundary indices."""
@@ -113,6 +122,7 @@ def upload_options(
         boundary_indices=form_json.boundary_indices(boundary),
         max_vertices=settings.max_vertices,
         max_hole_edges=settings.max_hole_edges,
+        cap_holes=cap_holes,
     )
 
 
@@ -143,10 +153,12 @@ async def resolve_operands(
     scale: float | None,
     check_count: Callable[[int], object] | None = None,
     footprints: bool = False,
+    cap_holes: bool = False,
 ) -> tuple[list[Operand], float]:
     """Every operand's spectrum (at least one), and the milliseconds spent solving uploaded files.
     ``check_count`` sees how many operands there are before any upload is solved (a mismatch
-    it raises costs no solve); with ``footprints`` each uploaded file's operand says where it lies."""
+    it raises costs no solve); with ``footprints`` each uploaded file's operand says where it lies;
+    with ``cap_holes`` the one operand must be an uploaded scan, solved with its holes capped."""
     given = parse_spectra(spectra, k)
     files = files or []
     count = len(files) + len(given)
@@ -159,9 +171,17 @@ async def resolve_operands(
             "Invalid request",
             f"at most {MAX_OPERANDS} operands (files and spectra), got {count}",
         )
+    if cap_holes and (len(files) != 1 or given):
+        raise ProblemError(
+            422,
+            "invalid-request",
+            "Invalid request",
+            f"cap_holes closes one uploaded scan of a whole body, got {len(files)} files and {len(given)} spectra: "
+            "the union operator reads partial scans by their boundary",
+        )
     if check_count is not None:
         check_count(count)
-    options = upload_options(settings, k, units, scale)
+    options = upload_options(settings, k, units, scale, cap_holes=cap_holes)
     sources = [f"files[{index}] {upload.filename or ''}".strip() for index, upload in enumerate(files)]
     started = time.perf_counter()
     outcomes = await _solve_all(request, files, options, footprints)

@@ -62,10 +62,12 @@ async def union_of_operands(
     scale: float | None,
     overlap: str | None = None,
     measure_overlap: bool = False,
+    cap_holes: bool = False,
 ) -> UnionOutcome:
     """Resolve the operands (solving uploaded files) and fold them through the union operator,
     told the overlap of each step where the client knows it, or measured from the uploads
-    (``measure_overlap``: views in one frame and pose)."""
+    (``measure_overlap``: views in one frame and pose); ``cap_holes``: one uploaded whole-body
+    scan, its holes capped (:func:`app.api.operands.resolve_operands`)."""
     overlaps = parse_overlaps(overlap)
     if measure_overlap:
         _check_measurable(overlaps, spectra, models)
@@ -74,7 +76,16 @@ async def union_of_operands(
         return checked_overlaps(overlaps, count, models.reads_overlap)
 
     operands, solve_ms = await resolve_operands(
-        request, settings, files, spectra, models.k, units, scale, check_overlaps, footprints=measure_overlap
+        request,
+        settings,
+        files,
+        spectra,
+        models.k,
+        units,
+        scale,
+        check_overlaps,
+        footprints=measure_overlap,
+        cap_holes=cap_holes,
     )
     if measure_overlap:  # k-d trees of up to UNION_POINTS points per step: off the event loop
         footprints = [o.footprint for o in operands if o.footprint is not None]

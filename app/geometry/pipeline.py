@@ -10,6 +10,7 @@ import numpy as np
 from pydantic import Field
 
 from app.contract import MAX_HOLE_EDGES
+from app.core.errors import InputError
 from app.geometry.errors import InvalidGeometry
 from app.geometry.io import load_shape, unit_scale
 from app.geometry.laplacian import Operators, mesh_operators, point_cloud_operators
@@ -33,6 +34,7 @@ class SpectrumOptions:
     boundary_indices: list[int] | None = None
     max_vertices: int = 100_000
     max_hole_edges: int = MAX_HOLE_EDGES
+    cap_holes: bool = False  # meshes: cap every boundary loop, not only pin-holes (a scan's blind spots)
 
 
 @dataclass(frozen=True)
@@ -52,7 +54,12 @@ class SpectrumReport:
     components_dropped: Annotated[
         int, Field(description="Connected components (point-cloud clusters) dropped: only the largest is kept.")
     ]
-    holes_filled: Annotated[int, Field(description="Pin-holes capped before the solve (small boundary loops).")]
+    holes_filled: Annotated[
+        int,
+        Field(
+            description="Holes capped before the solve: pin-holes (small boundary loops), or with cap_holes every loop."
+        ),
+    ]
     scale_to_metres: Annotated[float, Field(description="Factor applied to the file's coordinates (units or scale).")]
     assembly_ms: Annotated[float, Field(description="Laplacian assembly time.")]
     solve_ms: Annotated[float, Field(description="Eigen-solve time.")]
@@ -119,7 +126,7 @@ def cloud_spectrum(cloud: PointCloud, options: SpectrumOptions, scale: float = 1
 
 
 def _solve_mesh(mesh: Mesh, options: SpectrumOptions, scale: float, vectors: bool, footprint: bool = False) -> Solved:
-    prepared = prepare_mesh(mesh, k=options.k, max_hole_edges=options.max_hole_edges)
+    prepared = prepare_mesh(mesh, k=options.k, max_hole_edges=options.max_hole_edges, cap_holes=options.cap_holes)
     started = time.perf_counter()
     operators = mesh_operators(prepared.mesh.vertices, prepared.mesh.faces)
     has_boundary = bool(prepared.boundary.any())
@@ -142,6 +149,8 @@ def _solve_mesh(mesh: Mesh, options: SpectrumOptions, scale: float, vectors: boo
 def _solve_cloud(
     cloud: PointCloud, options: SpectrumOptions, scale: float, vectors: bool, footprint: bool = False
 ) -> Solved:
+    if options.cap_holes:
+        raise InputError("cap_holes caps a mesh's boundary loops; a point cloud has none: declare it closed instead")
     prepared = prepare_cloud(cloud, k=options.k, closed=options.closed, boundary_indices=options.boundary_indices)
     started = time.perf_counter()
     operators = point_cloud_operators(prepared.cloud.points)

@@ -79,9 +79,10 @@ def require_scan_coordinates(points: np.ndarray) -> None:
         )
 
 
-def prepare_mesh(mesh: Mesh, *, k: int, max_hole_edges: int) -> PreparedMesh:
+def prepare_mesh(mesh: Mesh, *, k: int, max_hole_edges: int, cap_holes: bool = False) -> PreparedMesh:
     """Check, merge, drop repeated and degenerate faces, keep the largest component, fill
-    pin-holes, and check there is room for k.
+    pin-holes (with ``cap_holes``, every boundary loop: a whole-body scan's blind spots, for the
+    closed surface's spectrum), and check there is room for k.
 
     Raises
     ------
@@ -107,7 +108,10 @@ def prepare_mesh(mesh: Mesh, *, k: int, max_hole_edges: int) -> PreparedMesh:
     counts = edge_face_counts(half)
     _require_surface_edges(counts)
     edges = half[counts == 1]
-    vertices, faces, filled = fill_small_holes(vertices, faces, edges, max_hole_edges)
+    if cap_holes:  # every traceable loop, whatever its length and perimeter
+        vertices, faces, filled = fill_small_holes(vertices, faces, edges, len(edges), np.inf)
+    else:
+        vertices, faces, filled = fill_small_holes(vertices, faces, edges, max_hole_edges)
     sources = np.r_[sources, np.full(len(vertices) - len(sources), -1)]
     boundary = vertices_of(boundary_half_edges(faces) if filled else edges, len(vertices))
     _require_room_for(k, int(np.count_nonzero(~boundary)))

@@ -79,7 +79,11 @@ def blind_spot_spectra(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(spectra (m, k), shape (m,)) of ``draws`` blind-spot scans of each of the posed ``shapes``
     (indices into the build's shapes), rows that could not be solved left out."""
-    rng = np.random.default_rng(seed)
     rows = np.repeat(shapes, draws)
-    masks = [blind_spot_mask(data.template.vertices, rng) for _ in rows]
-    return scans_of_shapes(data, rows, masks, k, workers)
+    return scans_of_shapes(data, rows, blind_spot_masks(data.template.vertices, len(rows), seed), k, workers)
+
+
+def blind_spot_masks(vertices: np.ndarray, count: int, seed: int) -> list[np.ndarray]:
+    """``count`` blind-spot masks (:func:`blind_spot_mask`) drawn from ``seed``, in order."""
+    rng = np.random.default_rng(seed)
+    return [blind_spot_mask(vertices, rng) for _ in range(count)]

@@ -12,7 +12,7 @@ from pydantic import BaseModel, Field
 
 from app.api.deps import ModelsDep, SettingsDep, StoreDep, WriteKeyDep
 from app.api.examples import success
-from app.api.operands import ScaleQuery, UnitsQuery, solve_upload, upload_options
+from app.api.operands import CapHolesQuery, ScaleQuery, UnitsQuery, solve_upload, upload_options
 from app.api.problems import DATABASE_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, ProblemError, problem_responses
 from app.geometry.errors import InvalidGeometry
 from app.geometry.io import resolve_file_type
@@ -57,14 +57,16 @@ async def add_shape(
     label: Annotated[str, Form(min_length=1, max_length=200, description="Identity label.")],
     units: UnitsQuery = "m",
     scale: ScaleQuery = None,
+    cap_holes: CapHolesQuery = False,
 ) -> ShapeOut:
     """Compute a complete shape's spectrum and store it under an identity label."""
-    options = upload_options(settings, models.k, units, scale)
+    options = upload_options(settings, models.k, units, scale, cap_holes=cap_holes)
     report = await solve_upload(request, await file.read(), resolve_file_type(file.filename, None), options)
     if report.boundary != "none":
         raise InvalidGeometry(
             "the store holds complete shapes, and this one has a boundary (its spectrum is a partial "
-            "scan's, Dirichlet): send a closed surface, or unite the parts first"
+            "scan's, Dirichlet): send a closed surface, a whole-body scan with cap_holes=true to cap its "
+            "blind spots, or unite the parts first"
         )
     record = await anyio.to_thread.run_sync(store.add, label, np.asarray(report.eigenvalues), file.filename or "upload")
     return ShapeOut(**record.__dict__)

@@ -9,7 +9,7 @@ from pydantic import Field
 
 from app.api.deps import SettingsDep
 from app.api.examples import success
-from app.api.operands import solve_upload, upload_options
+from app.api.operands import CapHolesQuery, solve_upload, upload_options
 from app.api.problems import UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.core.errors import InputError
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
@@ -50,6 +50,7 @@ async def spectrum(
     units: Annotated[Literal["m", "cm", "mm"], Query(description="Units of the file.")] = "m",
     scale: Annotated[float | None, Query(gt=0, description="Factor to metres; overrides units.")] = None,
     closed: Annotated[bool, Query(description="Point clouds only: the cloud is a closed surface.")] = False,
+    cap_holes: CapHolesQuery = False,
     file_type: Annotated[str | None, Query(description="Overrides the upload's extension.")] = None,
     boundary: Annotated[str | None, Form(description="Point clouds: JSON list of boundary point indices.")] = None,
     vectors: Annotated[
@@ -72,7 +73,7 @@ async def spectrum(
     """First k Dirichlet (or, for a closed surface, plain) Laplace–Beltrami eigenvalues in 1/m²."""
     resolved_type = resolve_file_type(file.filename, file_type)
     data = await file.read()
-    options = upload_options(settings, k, units, scale, closed=closed, boundary=boundary)
+    options = upload_options(settings, k, units, scale, closed=closed, boundary=boundary, cap_holes=cap_holes)
     if footprint and vectors:
         raise InputError("footprint and vectors cannot be asked together")
     if footprint:
