@@ -22,21 +22,16 @@ unions (predicted); (d) Test C sessions of five views, chained untold. Prints a 
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
-from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
-from app.geometry.shapes import Mesh
-from app.geometry.topology import drop_unreferenced
 from app.inference.body import open_surface
 from app.inference.models import SpectralModels
 from training.benchmark_arguments import benchmark_parser
 from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION
 from training.data.spectra import MESH
-from training.data.workers import mapped
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
 from training.learning.shapedna import TOP, hit_rates
-from training.reconstruction.blind_spots import blind_spot_masks, scans_of_shapes
+from training.reconstruction.blind_spots import blind_spot_masks, capped_scans_of_shapes, scans_of_shapes
 from training.reconstruction.evaluate import (
     BLIND_SPOT_SEED,
     UNKNOWN_GROUPS,
@@ -57,15 +52,6 @@ def rebuilt_spectra(models: SpectralModels, spectra: np.ndarray, sigma: np.ndarr
         return np.stack(list(pool.map(closed_spectrum, bodies, [faces] * len(bodies), [models.k] * len(bodies))))
 
 
-@threadpool_limits.wrap(limits=1)  # one solve per worker process
-def capped_scan_spectrum(shapes: str, shape: int, faces: np.ndarray, seen: np.ndarray, k: int) -> np.ndarray:
-    """The closed spectrum of a posed shape scanned through ``seen``, its holes capped as
-    ``cap_holes=true`` caps an upload's."""
-    vertices = np.asarray(mapped(shapes)[shape], dtype=np.float64)
-    scan = Mesh(*drop_unreferenced(vertices, faces[seen[faces].all(axis=1)]))
-    return np.asarray(mesh_spectrum(scan, SpectrumOptions(k=k, cap_holes=True)).eigenvalues)
-
-
 def main() -> None:
     parser = benchmark_parser(__doc__, models=True)
     args = parser.parse_args()
@@ -80,18 +66,7 @@ def main() -> None:
     rows = np.arange(0, len(stored), EVERY)
     masks = blind_spot_masks(data.template.vertices, len(rows), BLIND_SPOT_SEED)  # as the card's row draws them
     scans, scanned = scans_of_shapes(data, rows, masks, models.k)
-    posed, faces = str(data.root / "work" / "shapes.npy"), data.template.faces
-    with ProcessPoolExecutor() as pool:
-        capped = {
-            int(shape): spectrum
-            for shape, spectrum in zip(
-                rows,
-                pool.map(
-                    capped_scan_spectrum, [posed] * len(rows), rows, [faces] * len(rows), masks, [models.k] * len(rows)
-                ),
-                strict=True,
-            )
-        }
+    capped = dict(zip(rows.tolist(), capped_scans_of_shapes(data, rows, masks, models.k), strict=True))
     full = pairs.rows(
         np.flatnonzero((pairs.scenario == FULL_COVERAGE) & ~np.isin(pairs.split, ("train", "validation")))
     )

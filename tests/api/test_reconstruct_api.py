@@ -190,3 +190,29 @@ def test_a_complete_scan_without_its_soles_is_rebuilt_and_noted_as_open_not_dist
         for s in (spectrum, list(np.array(rebuilt["eigenvalues"])))
     ]
     assert verdicts == ["open", "closed"]  # the mesh's header says what the JSON's warnings say
+
+
+def test_a_whole_body_scan_uploaded_with_its_holes_capped_is_rebuilt_as_the_closed_body(client, template, rebuilt):
+    """The template without its soles, uploaded with cap_holes=true: solved closed, read by the
+    network for measured complete bodies, and judged as one (closed, no note); one file only."""
+    seen = above_soles(template.vertices, 0.015)
+    vertices, faces = drop_unreferenced(template.vertices, template.faces[seen[template.faces].all(axis=1)])
+    ply = trimesh.Trimesh(vertices, faces, process=False).export(file_type="ply")
+    response = client.post(
+        "/v1/reconstruct", params={"cap_holes": "true"}, files={"files": ("scan.ply", io.BytesIO(ply))}
+    )
+    assert response.status_code == 200, response.text
+    answer = response.json()
+    assert abs(answer["eigenvalues"][0]) <= BOUNDARY_RATIO * answer["eigenvalues"][1]  # capped: closed
+    shape = np.array(answer["vertices"])
+    error = np.linalg.norm(rigidly_aligned(shape, template.vertices) - template.vertices, axis=1)
+    closed_error = np.linalg.norm(
+        rigidly_aligned(np.array(rebuilt["vertices"]), template.vertices) - template.vertices, axis=1
+    )
+    # Measured: 9.0 mm, the closed template 7.1 (left open: 8.2, which the union network learned
+    # soles-cut scans for; on unknown people capping halves the error, benchmarks/decoder_blind_spots.py).
+    assert error.mean() < closed_error.mean() + 0.003
+    assert answer["spectrum_relative_error"] <= GAP_WARNING and answer["warnings"] == []
+    two = [("files", ("a.ply", io.BytesIO(ply))), ("files", ("b.ply", io.BytesIO(ply)))]
+    refused = client.post("/v1/reconstruct", params={"cap_holes": "true"}, files=two)
+    assert refused.status_code == 422 and "cap_holes" in refused.json()["detail"]

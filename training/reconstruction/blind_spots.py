@@ -16,6 +16,9 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
+from app.geometry.shapes import Mesh
+from app.geometry.topology import drop_unreferenced
 from training.data.spectra import MESH, task_spectrum
 from training.data.workers import mapped
 from training.learning.data import SpectralData
@@ -72,6 +75,24 @@ def scans_of_shapes(
         spectra = np.stack([job.result() for job in jobs])
     solved = np.isfinite(spectra).all(axis=1)
     return spectra[solved], shapes[solved]
+
+
+@threadpool_limits.wrap(limits=1)  # one solve per worker process
+def _capped(shapes: str, shape: int, faces: np.ndarray, mask: np.ndarray, k: int) -> np.ndarray:
+    vertices = np.asarray(mapped(shapes)[shape], dtype=np.float64)
+    scan = Mesh(*drop_unreferenced(vertices, faces[mask[faces].all(axis=1)]))
+    return np.asarray(mesh_spectrum(scan, SpectrumOptions(k=k, cap_holes=True)).eigenvalues)
+
+
+def capped_scans_of_shapes(
+    data: SpectralData, shapes: np.ndarray, masks: list[np.ndarray], k: int, workers: int | None = None
+) -> np.ndarray:
+    """(len(shapes), k) each posed shape seen through its mask and uploaded with ``cap_holes=true``:
+    the scan's holes capped by the service's pipeline, the closed surface's spectrum."""
+    faces, posed = data.template.faces, str(data.root / "work" / "shapes.npy")
+    with ProcessPoolExecutor(workers) as pool:
+        jobs = [pool.submit(_capped, posed, shape, faces, mask, k) for shape, mask in zip(shapes, masks, strict=True)]
+        return np.stack([job.result() for job in jobs])
 
 
 def blind_spot_spectra(
