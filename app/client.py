@@ -97,10 +97,14 @@ class Client:
         closed: bool = False,
         boundary: Sequence[int] | None = None,
         footprint: bool = False,
+        cap_holes: bool = False,
     ) -> SpectrumReport | FootprintedReport:
         """The first ``k`` eigenvalues of one scan (Dirichlet where it has a boundary), in 1/m²;
-        with ``footprint`` also its footprint token, for :meth:`overlap`."""
-        params = _params(k=k, units=units, scale=scale, closed=closed, footprint=footprint or None)
+        with ``footprint`` also its footprint token, for :meth:`overlap`; with ``cap_holes`` a
+        whole-body mesh's holes capped first (its closed spectrum)."""
+        params = _params(
+            k=k, units=units, scale=scale, closed=closed, footprint=footprint or None, cap_holes=cap_holes or None
+        )
         data = {"boundary": json.dumps(list(boundary))} if boundary is not None else None
         body = self._post("/v1/spectrum", params, files=[("file", _part(scan))], data=data)
         return FootprintedReport(**body) if footprint else SpectrumReport(**body)
@@ -149,10 +153,12 @@ class Client:
         scale: float | None = None,
         overlap: Sequence[float] | None = None,
         measure_overlap: bool = False,
+        cap_holes: bool = False,
     ) -> ReconstructResponse:
         """The person's body rebuilt from the union's spectrum (rest pose, template topology), with
-        its height, area and its own spectrum as the check."""
-        params = _union_params(units, scale, overlap, measure_overlap)
+        its height, area and its own spectrum as the check; ``cap_holes``: one whole-body mesh,
+        its holes capped first."""
+        params = _union_params(units, scale, overlap, measure_overlap) | _params(cap_holes=cap_holes or None)
         return ReconstructResponse(**self._operands("/v1/reconstruct", files, spectra, params))
 
     def retrieve(
@@ -166,10 +172,13 @@ class Client:
         scale: float | None = None,
         overlap: Sequence[float] | None = None,
         measure_overlap: bool = False,
+        cap_holes: bool = False,
     ) -> RetrieveResponse:
         """The stored complete shapes nearest to the union of the operands; an open surface (a scan with
-        holes) is ranked through the body the shape decoder rebuilds from it unless ``rebuild`` is False."""
+        holes) is ranked through the body the shape decoder rebuilds from it unless ``rebuild`` is False;
+        ``cap_holes``: one whole-body mesh, its holes capped first (ranked as the closed surface)."""
         params = {"top": top, "rebuild": rebuild, **_union_params(units, scale, overlap, measure_overlap)}
+        params |= _params(cap_holes=cap_holes or None)
         return RetrieveResponse(**self._operands("/v1/retrieve", files, spectra, params))
 
     def models(self) -> ModelsResponse:
@@ -180,11 +189,13 @@ class Client:
         """One page of the stored complete shapes, oldest first."""
         return ShapePage(**self._answer(self._http.get("/v1/shapes", params={"offset": offset, "limit": limit})))
 
-    def add_shape(self, scan: Scan, label: str, *, units: Units = "m", scale: float | None = None) -> ShapeOut:
-        """Store a complete (closed) shape's spectrum under an identity label (needs the API key)."""
-        body = self._post(
-            "/v1/shapes", _params(units=units, scale=scale), files=[("file", _part(scan))], data={"label": label}
-        )
+    def add_shape(
+        self, scan: Scan, label: str, *, units: Units = "m", scale: float | None = None, cap_holes: bool = False
+    ) -> ShapeOut:
+        """Store a complete (closed) shape's spectrum under an identity label (needs the API key);
+        ``cap_holes``: a whole-body scan whose blind spots are capped first."""
+        params = _params(units=units, scale=scale, cap_holes=cap_holes or None)
+        body = self._post("/v1/shapes", params, files=[("file", _part(scan))], data={"label": label})
         return ShapeOut(**body)
 
     def delete_shape(self, shape_id: str) -> None:

@@ -101,3 +101,24 @@ def test_problems_are_raised_with_their_body(service, client):
     with pytest.raises(ServiceProblem) as missing:
         service.delete_shape("not-a-shape")
     assert missing.value.status == 404 and missing.value.type == "/problems/shape-not-found"
+
+
+def test_a_ball_with_a_hole_is_stored_and_retrieved_once_its_hole_is_capped(service):
+    """cap_holes through the client: a ball scanned with a 36° polar blind spot is a partial shape
+    (refused by the store) until its hole is capped; capped, it is the closed ball again, which
+    the store then finds by its own spectrum."""
+    ball = trimesh.creation.icosphere(subdivisions=3)
+    seen = ball.vertices[:, 2] < 0.8
+    holed = trimesh.Trimesh(ball.vertices, ball.faces[seen[ball.faces].all(axis=1)])
+    scan = ("holed.ply", holed.export(file_type="ply"))
+    assert service.spectrum(scan, k=10).boundary == "dirichlet"
+    capped = service.spectrum(scan, k=10, cap_holes=True)
+    assert capped.boundary == "none" and capped.holes_filled == 1
+    with pytest.raises(ServiceProblem) as partial:
+        service.add_shape(scan, "holed ball", units="cm")
+    assert partial.value.status == 422 and "cap_holes" in partial.value.problem.detail
+    stored = service.add_shape(scan, "holed ball", units="cm", cap_holes=True)
+    found = service.retrieve(files=[scan], units="cm", cap_holes=True, top=1)
+    assert found.ranked_by == "union" and found.matches[0].id == stored.id
+    assert found.matches[0].distance == pytest.approx(0.0, abs=1e-6)
+    service.delete_shape(stored.id)
