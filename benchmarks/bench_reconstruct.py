@@ -1,10 +1,13 @@
-"""Latency and answer size of ``POST /v1/reconstruct``, in process, as a client sees it.
+"""Latency and answer size of ``POST /v1/reconstruct`` and of ``/v1/retrieve``'s rebuilt-body
+ranking, in process, as a client sees it.
 
 Run: ``python benchmarks/bench_reconstruct.py [--repeats 8]``. The operand is the template
 body's own complete spectrum (sent as spectra, so no upload is solved); the request decodes it,
 writes the rebuilt body as PLY and solves it on the solver workers for the spectrum check.
 Prints the median milliseconds and the answer's bytes for JSON and PLY, and ``/v1/union`` on the
-same operand for comparison (what the reconstruction adds).
+same operand for comparison (what the reconstruction adds); then ``/v1/retrieve`` of that closed
+spectrum (ranked as it is) and of the template without its soles (an open surface, ranked
+through the body rebuilt from it: the same decode and solve).
 """
 
 import argparse
@@ -19,8 +22,12 @@ from fastapi.testclient import TestClient
 from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
+from app.geometry.topology import drop_unreferenced
 from app.inference.template import Template
 from app.main import create_app
+from training.reconstruction.blind_spots import above_soles
+
+SOLES = 0.015  # m above the lowest vertex: a body scanned standing, its soles unseen
 
 
 def timed(client: TestClient, path: str, form: dict, params: dict, repeats: int) -> tuple[float, int]:
@@ -42,15 +49,20 @@ def main() -> None:
     template = Template.load(Settings().models_dir)
     spectrum = mesh_spectrum(Mesh(template.vertices, template.faces), SpectrumOptions(k=20)).eigenvalues
     form = {"spectra": json.dumps([list(spectrum)])}
+    seen = above_soles(template.vertices, SOLES)
+    scan = Mesh(*drop_unreferenced(template.vertices, template.faces[seen[template.faces].all(axis=1)]))
+    open_form = {"spectra": json.dumps([list(mesh_spectrum(scan, SpectrumOptions(k=20)).eigenvalues)])}
     with tempfile.TemporaryDirectory() as scratch:
         settings = Settings(database_path=Path(scratch) / "shapes.sqlite")
         with TestClient(create_app(settings)) as client:
-            for label, path, params in (
-                ("reconstruct json", "/v1/reconstruct", {}),
-                ("reconstruct ply", "/v1/reconstruct", {"format": "ply"}),
-                ("union", "/v1/union", {}),
+            for label, path, params, operands in (
+                ("reconstruct json", "/v1/reconstruct", {}, form),
+                ("reconstruct ply", "/v1/reconstruct", {"format": "ply"}, form),
+                ("union", "/v1/union", {}, form),
+                ("retrieve closed", "/v1/retrieve", {}, form),
+                ("retrieve open", "/v1/retrieve", {}, open_form),
             ):
-                ms, size = timed(client, path, form, params, args.repeats)
+                ms, size = timed(client, path, operands, params, args.repeats)
                 print(f"{label:18s} median {ms:7.1f} ms   {size:8d} bytes")
 
 
