@@ -17,16 +17,19 @@ import httpx
 import numpy as np
 import pytest
 import selenium.webdriver as webdriver
+import trimesh
 from PIL import Image
 from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.by import By
 from selenium.webdriver.support.ui import WebDriverWait
 
 from app.core.config import Settings
+from app.geometry.topology import drop_unreferenced
 from app.inference.template import PART_NAMES, Template
 from app.samples import template_part
 from tests.api.servers import start, wait_ready
 from tests.postgres import free_port
+from training.reconstruction.blind_spots import above_soles
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 DRIVER = shutil.which("chromedriver")
@@ -103,11 +106,16 @@ def _drawn_share(element) -> float:
     return float(np.mean(np.abs(pixels.astype(int) - BACKGROUND).sum(axis=1) > 30))
 
 
-def _drop_one_at_a_time(browser, base: str, scans: list[Path], *, registered: bool = False) -> None:
-    """A fresh page, "registered scans" ticked or not, each scan dropped once the last is shown."""
+def _drop_one_at_a_time(
+    browser, base: str, scans: list[Path], *, registered: bool = False, whole: bool = False
+) -> None:
+    """A fresh page, "registered scans" and "whole-body scans" ticked or not, each scan dropped once
+    the last is shown."""
     browser.get(f"{base}/")
     if registered:
         browser.find_element(By.ID, "registered").click()
+    if whole:
+        browser.find_element(By.ID, "whole").click()
     upload = browser.find_element(By.ID, "file")
     for count, path in enumerate(scans, start=1):
         upload.send_keys(str(path))
@@ -190,6 +198,31 @@ def test_a_registered_session_measures_each_scan_s_overlap_and_tells_the_union(b
     }
     assert shown == pytest.approx(told["part_coverage"], abs=1e-4)
     assert told["part_coverage"] != pytest.approx(untold["part_coverage"], abs=1e-3)  # told it, the answer moved
+
+
+@pytest.fixture(scope="module")
+def soleless(tmp_path_factory) -> Path:
+    """The template body scanned standing: the whole body but its soles."""
+    template = Template.load(Settings().models_dir)
+    seen = above_soles(template.vertices, 0.015)
+    vertices, faces = drop_unreferenced(template.vertices, template.faces[seen[template.faces].all(axis=1)])
+    path = tmp_path_factory.mktemp("whole") / "soleless.ply"
+    path.write_bytes(trimesh.Trimesh(vertices, faces, process=False).export(file_type="ply"))
+    return path
+
+
+@pytest.mark.parametrize("whole, ranked_by, round_trip", [(True, "union", "closed"), (False, "rebuilt_body", "open")])
+def test_a_whole_body_scan_is_read_closed_when_its_holes_are_capped(
+    base, soleless, browser, whole, ranked_by, round_trip
+):
+    """Ticked, the scan's holes are capped before its solve: λ₁ = 0, ranked by its own spectrum,
+    rebuilt as a closed body; unticked it stays the open surface it is (the service's other path)."""
+    _drop_one_at_a_time(browser, base, [soleless], whole=whole)
+    part = browser.find_element(By.CSS_SELECTOR, "#parts li").text
+    first = float(re.search(r"λ₁ = (-?[0-9.]+)", part).group(1))
+    assert (abs(first) < 1e-3) == whole
+    assert browser.find_element(By.ID, "matches-note").get_attribute("data-ranked-by") == ranked_by
+    assert browser.find_element(By.ID, "rebuilt-note").get_attribute("data-round-trip") == round_trip
 
 
 def test_the_page_and_its_script_load_nothing_from_another_host(base):

@@ -4,7 +4,8 @@
 // height and spectrum check in headers) for the union of all parts so far. With "registered
 // scans" (one scanner's views: one frame, one pose) each scan's footprint token comes back
 // with its spectrum, POST /v1/overlap measures the new scan against the union so far's token,
-// and every union is told those overlaps.
+// and every union is told those overlaps. With "whole-body scans" each scan's holes are capped
+// before its solve (cap_holes=true): a whole body scanned standing is solved as the closed body.
 import * as THREE from "three";
 import { OrbitControls } from "/static/vendor/three/OrbitControls.js";
 import { PLYLoader } from "/static/vendor/three/PLYLoader.js";
@@ -58,7 +59,8 @@ async function addScan(file) {
   form.append("file", file, file.name);
   const registered = $("registered").checked;
   try {
-    const query = `units=${$("units").value}${registered ? "&footprint=true" : ""}`;
+    const whole = $("whole").checked ? "&cap_holes=true" : "";
+    const query = `units=${$("units").value}${registered ? "&footprint=true" : ""}${whole}`;
     const report = await answer(await fetch(`/v1/spectrum?${query}`, { method: "POST", body: form }));
     const { overlap, union } = registered ? await measured(report.footprint) : {};
     parts.push({ name: file.name, eigenvalues: report.eigenvalues, warnings: report.warnings, overlap });
