@@ -187,7 +187,7 @@ async function showRebuilt(response) {
   note.dataset.roundTrip = verdict;
   note.textContent = `Height ${(100 * height).toFixed(1)} cm; its own spectrum is ${(100 * gap).toFixed(1)} % from the union's`
     + ({
-      open: ", as expected of a scan with holes (the soles, the top of the head): the body is the closed one it belongs to.",
+      open: ", as an open surface's comes back (holes such as the soles, or parts not scanned yet): the body is rebuilt closed, a guess where the scans do not reach.",
       unseen: ": not a complete body's spectrum yet, do not trust this body.",
     }[verdict] ?? ".");
   note.classList.toggle("warning", verdict === "unseen");
