@@ -60,7 +60,9 @@ class ReconstructResponse(UnionResponse):
         "(λ₁ of a closed body is 0): the decoder's own check, 1.3 % on complete bodies' spectra and 4.8 % on "
         "two-part unions on average (model card); over 10 % adds a warning. An open surface's spectrum (λ₁ > 0: "
         "a scan with holes) cannot come back as a closed body's: up to 60 % it adds a note (complete scans with "
-        "blind spots come back 11–45 % away), over 60 % the warning (a large part of the body unseen)."
+        "blind spots come back 11–45 % away), over 60 % the warning (a large part of the body unseen); for an open "
+        "union the operator predicted (several operands) the warning comes over 25 % (unions of parts covering the "
+        "body come back 1–21 % away, of parts that leave a tenth of it out or more 26–76 %)."
     )
 
 
