@@ -23,7 +23,6 @@ from training.reconstruction.blind_spots import (
     above_soles,
     away_from,
     blind_spot_masks,
-    capped_scans_of_shapes,
     head_top,
     scans_of_shapes,
 )
@@ -73,9 +72,9 @@ def main() -> None:
         spectra, scanned = scans_of_shapes(data, shapes, masks, complete.shape[1])
         unseen = np.mean([1 - area[m].sum() / area.sum() for m in masks])
         truth = rest[data.identity_of(scanned)]
-        capped = capped_scans_of_shapes(data, shapes, masks, complete.shape[1])
+        capped, closed_up = scans_of_shapes(data, shapes, masks, complete.shape[1], cap_holes=True)
         rows = [(models, spectra, truth) for models in decoders] + [
-            (decoders[0], capped, rest[data.identity_of(shapes)])
+            (decoders[0], capped, rest[data.identity_of(closed_up)])
         ]
         cells = []
         for models, queries, people in rows:

@@ -31,7 +31,7 @@ from training.benchmark_arguments import benchmark_parser
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
 from training.learning.export import decoder_basis
-from training.reconstruction.evaluate import body_scores, closed_spectrum, query_sets
+from training.reconstruction.evaluate import body_scores, closed_spectra, closed_spectrum, query_sets
 from training.reconstruction.spectral_fit import CotangentSpectrum, fitted
 from training.reconstruction.train import data_set_rest_bodies
 
@@ -52,7 +52,7 @@ def main() -> None:
     whole, fits = [], []
     for name, (spectra, sigma, identity) in sets.items():
         decoded = np.stack([models.reconstruct(s, z) for s, z in zip(spectra, sigma, strict=True)])
-        ours = [spectrum_gap(closed_spectrum(d, faces, models.k), s) for d, s in zip(decoded, spectra, strict=True)]
+        ours = [spectrum_gap(b, s) for b, s in zip(closed_spectra(decoded, faces, models.k), spectra, strict=True)]
         truth = [spectrum_gap(true_spectra[p], s) for p, s in zip(identity, spectra, strict=True)]
         whole.append((name, len(spectra), ours, truth))
         for row in rng.choice(len(spectra), min(args.fit_rows, len(spectra)), replace=False):

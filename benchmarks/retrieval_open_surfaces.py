@@ -19,8 +19,6 @@ alone and all of them as the service now ranks them (closed as before); (c) Test
 unions (predicted); (d) Test C sessions of five views, chained untold. Prints a Markdown table.
 """
 
-from concurrent.futures import ProcessPoolExecutor
-
 import numpy as np
 
 from app.inference.body import open_surface
@@ -31,25 +29,17 @@ from training.data.spectra import MESH
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
 from training.learning.shapedna import TOP, hit_rates
-from training.reconstruction.blind_spots import blind_spot_masks, capped_scans_of_shapes, scans_of_shapes
+from training.reconstruction.blind_spots import blind_spot_masks, scans_of_shapes
 from training.reconstruction.evaluate import (
     BLIND_SPOT_SEED,
     UNKNOWN_GROUPS,
     chained_union,
-    closed_spectrum,
     identity_groups,
+    rebuilt_spectra,
 )
 
 PARTIAL_ROWS = 150  # Test A partial unions scored: enough for a rate to ±4 points
 EVERY = 3  # every third stored shape scanned with blind spots
-
-
-def rebuilt_spectra(models: SpectralModels, spectra: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """(n, k) the closed spectrum of the body the served decoder rebuilds from each row."""
-    bodies = [models.reconstruct(s, z) for s, z in zip(spectra, sigma, strict=True)]
-    faces = models.template.faces
-    with ProcessPoolExecutor() as pool:
-        return np.stack(list(pool.map(closed_spectrum, bodies, [faces] * len(bodies), [models.k] * len(bodies))))
 
 
 def main() -> None:
@@ -66,7 +56,7 @@ def main() -> None:
     rows = np.arange(0, len(stored), EVERY)
     masks = blind_spot_masks(data.template.vertices, len(rows), BLIND_SPOT_SEED)  # as the card's row draws them
     scans, scanned = scans_of_shapes(data, rows, masks, models.k)
-    capped = dict(zip(rows.tolist(), capped_scans_of_shapes(data, rows, masks, models.k), strict=True))
+    capped_scans, capped_shapes = scans_of_shapes(data, rows, masks, models.k, cap_holes=True)
     full = pairs.rows(
         np.flatnonzero((pairs.scenario == FULL_COVERAGE) & ~np.isin(pairs.split, ("train", "validation")))
     )
@@ -101,10 +91,9 @@ def main() -> None:
         found = hit_rates(spectra, identity[shapes], shapes, stored, identity)
         return " / ".join(f"{100 * found[f'top{t}']:.1f}" for t in TOP) + " %"
 
-    capped_scans = np.stack([capped[int(shape)] for shape in scanned])
     print(
-        f"| complete scans with blind spots, uploaded with cap_holes=true | {len(scanned)} "
-        f"| {100 * open_surface(capped_scans).mean():.0f} % | {rates(capped_scans, scanned)} | — |"
+        f"| complete scans with blind spots, uploaded with cap_holes=true | {len(capped_shapes)} "
+        f"| {100 * open_surface(capped_scans).mean():.0f} % | {rates(capped_scans, capped_shapes)} | — |"
     )
     rebuilt_full = None
     for name, (spectra, sigma, shapes) in kinds.items():

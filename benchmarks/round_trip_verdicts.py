@@ -14,7 +14,6 @@ verdict a measured scan's thresholds would give (σ = 0: the rule for every open
 """
 
 from collections import Counter
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
@@ -26,7 +25,7 @@ from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION
 from training.data.spectra import MESH
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
-from training.reconstruction.evaluate import closed_spectrum
+from training.reconstruction.evaluate import rebuilt_spectra
 
 COVERAGE_BINS = (0.0, 0.5, 0.7, 0.8, 0.9, 1.01)
 VERDICTS = ("closed", "open", "unseen")
@@ -39,7 +38,7 @@ def main() -> None:
     data = SpectralData(args.data)
     models = SpectralModels(args.models)
     union = served_predictors(args.models)[0]
-    pairs, faces = data.pairs, data.template.faces
+    pairs = data.pairs
     print("| unions | union covers | n | gap p5 / p50 / p95 | closed / open / unseen | judged as a measured scan |")
     print("|---|---|---|---|---|---|")
     for name, scenario, split in (
@@ -50,9 +49,7 @@ def main() -> None:
         selection = (pairs.scenario == scenario) & (pairs.split == split) & (pairs.variant == MESH)
         rows = pairs.rows(np.flatnonzero(selection)[: args.rows])
         spectra, sigma = (x.astype(np.float64) for x in union(rows.a, rows.b))
-        bodies = [models.reconstruct(s, z) for s, z in zip(spectra, sigma, strict=True)]
-        with ProcessPoolExecutor() as pool:
-            rebuilt = list(pool.map(closed_spectrum, bodies, [faces] * len(bodies), [models.k] * len(bodies)))
+        rebuilt = rebuilt_spectra(models, spectra, sigma)
         gaps = np.array([spectrum_gap(b, s) for b, s in zip(rebuilt, spectra, strict=True)])
         verdicts = np.array([round_trip(g, UnionEstimate(s, z)) for g, s, z in zip(gaps, spectra, sigma, strict=True)])
         as_measured = np.array(

@@ -15,8 +15,6 @@ as the card's retrieval table counts them. Where the true union does no
 better, what limits the row is not the union operator's error.
 """
 
-from concurrent.futures import ProcessPoolExecutor
-
 import numpy as np
 
 from app.inference.body import open_surface
@@ -26,7 +24,7 @@ from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors, served_told_predictor
 from training.learning.masks import SERVED_LOCALIZER, symmetric_scores
 from training.learning.shapedna import hit_rates
-from training.reconstruction.evaluate import body_scores, closed_spectrum
+from training.reconstruction.evaluate import body_scores, closed_spectra
 from training.reconstruction.train import data_set_rest_bodies
 
 
@@ -73,10 +71,7 @@ def main() -> None:
         located = symmetric_scores(region(spectra), true_region, data.vertex_area, template.mirror, template.labels)
         bodies = np.stack([models.reconstruct(s, g) for s, g in zip(spectra, sigma, strict=True)])
         score = body_scores(bodies, truth, template.faces)
-        with ProcessPoolExecutor() as pool:
-            rebuilt = np.stack(
-                list(pool.map(closed_spectrum, bodies, [template.faces] * len(bodies), [models.k] * len(bodies)))
-            )
+        rebuilt = closed_spectra(bodies, template.faces, models.k)
         ranked = np.where(open_surface(spectra)[:, None], rebuilt, spectra)
         found = hit_rates(ranked, person, chains.shape, stored, stored_identity)
         print(

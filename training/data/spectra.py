@@ -48,10 +48,13 @@ def as_point_cloud(mesh: Mesh) -> PointCloud:
     return PointCloud(mesh.vertices, boundary if boundary.any() else None)
 
 
-def task_spectrum(vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray, variant: str, k: int) -> np.ndarray:
-    """k eigenvalues of one task, NaN where the region cannot be solved (counted in the card)."""
+def task_spectrum(
+    vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray, variant: str, k: int, *, cap_holes: bool = False
+) -> np.ndarray:
+    """k eigenvalues of one task, NaN where the region cannot be solved (counted in the card);
+    ``cap_holes``: the region's holes capped as the service's ``cap_holes=true`` caps an upload's."""
     mesh = region_mesh(vertices, faces, mask)
-    options = SpectrumOptions(k=k)
+    options = SpectrumOptions(k=k, cap_holes=cap_holes)
     try:
         if variant == CLOUD:
             cloud = as_point_cloud(mesh)

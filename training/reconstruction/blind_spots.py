@@ -16,9 +16,6 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
-from app.geometry.shapes import Mesh
-from app.geometry.topology import drop_unreferenced
 from training.data.spectra import MESH, task_spectrum
 from training.data.workers import mapped
 from training.learning.data import SpectralData
@@ -60,39 +57,32 @@ def blind_spot_mask(vertices: np.ndarray, rng: np.random.Generator) -> np.ndarra
 
 
 @threadpool_limits.wrap(limits=1)  # one solve per worker process
-def _solve(shapes: str, shape: int, faces: np.ndarray, mask: np.ndarray, k: int) -> np.ndarray:
-    return task_spectrum(np.asarray(mapped(shapes)[shape], dtype=np.float64), faces, mask, MESH, k)
+def _solve(shapes: str, shape: int, faces: np.ndarray, mask: np.ndarray, k: int, cap_holes: bool) -> np.ndarray:
+    vertices = np.asarray(mapped(shapes)[shape], dtype=np.float64)
+    return task_spectrum(vertices, faces, mask, MESH, k, cap_holes=cap_holes)
 
 
 def scans_of_shapes(
-    data: SpectralData, shapes: np.ndarray, masks: list[np.ndarray], k: int, workers: int | None = None
+    data: SpectralData,
+    shapes: np.ndarray,
+    masks: list[np.ndarray],
+    k: int,
+    workers: int | None = None,
+    *,
+    cap_holes: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(spectra (m, k), shape (m,)) of each posed shape of the build seen through its mask (one
-    per shape), rows that could not be solved left out."""
+    per shape), rows that could not be solved left out; with ``cap_holes`` each scan's holes
+    capped first, as an upload with ``cap_holes=true`` is (the closed surface's spectrum)."""
     faces, posed = data.template.faces, str(data.root / "work" / "shapes.npy")
     with ProcessPoolExecutor(workers) as pool:
-        jobs = [pool.submit(_solve, posed, shape, faces, mask, k) for shape, mask in zip(shapes, masks, strict=True)]
+        jobs = [
+            pool.submit(_solve, posed, shape, faces, mask, k, cap_holes)
+            for shape, mask in zip(shapes, masks, strict=True)
+        ]
         spectra = np.stack([job.result() for job in jobs])
     solved = np.isfinite(spectra).all(axis=1)
     return spectra[solved], shapes[solved]
-
-
-@threadpool_limits.wrap(limits=1)  # one solve per worker process
-def _capped(shapes: str, shape: int, faces: np.ndarray, mask: np.ndarray, k: int) -> np.ndarray:
-    vertices = np.asarray(mapped(shapes)[shape], dtype=np.float64)
-    scan = Mesh(*drop_unreferenced(vertices, faces[mask[faces].all(axis=1)]))
-    return np.asarray(mesh_spectrum(scan, SpectrumOptions(k=k, cap_holes=True)).eigenvalues)
-
-
-def capped_scans_of_shapes(
-    data: SpectralData, shapes: np.ndarray, masks: list[np.ndarray], k: int, workers: int | None = None
-) -> np.ndarray:
-    """(len(shapes), k) each posed shape seen through its mask and uploaded with ``cap_holes=true``:
-    the scan's holes capped by the service's pipeline, the closed surface's spectrum."""
-    faces, posed = data.template.faces, str(data.root / "work" / "shapes.npy")
-    with ProcessPoolExecutor(workers) as pool:
-        jobs = [pool.submit(_capped, posed, shape, faces, mask, k) for shape, mask in zip(shapes, masks, strict=True)]
-        return np.stack([job.result() for job in jobs])
 
 
 def blind_spot_spectra(

@@ -26,7 +26,7 @@ from threadpoolctl import threadpool_limits
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
 from app.inference.body import body_height, spectrum_gap, surface_area
-from app.inference.models import chained_sigma
+from app.inference.models import SpectralModels, chained_sigma
 from app.retrieval.distance import features
 from training.data.spectra import MESH
 from training.learning.data import SpectralData
@@ -70,13 +70,24 @@ def closed_spectrum(vertices: np.ndarray, faces: np.ndarray, k: int) -> np.ndarr
     return np.asarray(mesh_spectrum(Mesh(vertices.astype(np.float64), faces), SpectrumOptions(k=k)).eigenvalues)
 
 
+def closed_spectra(bodies: np.ndarray, faces: np.ndarray, k: int, workers: int | None = None) -> np.ndarray:
+    """(n, k) each of the (n, V, 3) bodies' closed spectrum, one process per solve."""
+    with ProcessPoolExecutor(workers) as pool:
+        return np.stack(list(pool.map(closed_spectrum, bodies, [faces] * len(bodies), [k] * len(bodies))))
+
+
+def rebuilt_spectra(models: SpectralModels, spectra: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """(n, k) the closed spectrum of the body the served decoder rebuilds from each row (with its σ):
+    what ``/v1/reconstruct`` checks its answer by and ``/v1/retrieve`` ranks an open union by."""
+    bodies = np.stack([models.reconstruct(s, z) for s, z in zip(spectra, sigma, strict=True)])
+    return closed_spectra(bodies, models.template.faces, models.k)
+
+
 def round_trip(bodies: np.ndarray, faces: np.ndarray, targets: np.ndarray, workers: int | None) -> dict[str, float]:
     """The rebuilt bodies' own spectra against the spectra they were decoded from (λ₂…λ_k): the
     mean gap, and its 5th and 95th percentiles (what ``/v1/reconstruct``'s verdict thresholds
     are read against)."""
-    k = targets.shape[1]
-    with ProcessPoolExecutor(workers) as pool:
-        spectra = np.stack(list(pool.map(closed_spectrum, bodies, [faces] * len(bodies), [k] * len(bodies))))
+    spectra = closed_spectra(bodies, faces, targets.shape[1], workers)
     gaps = [spectrum_gap(s, t) for s, t in zip(spectra, targets, strict=True)]
     low, high = np.percentile(gaps, [5, 95])
     return {"spectrum_mre": float(np.mean(gaps)), "spectrum_p05": float(low), "spectrum_p95": float(high)}

@@ -12,9 +12,8 @@ blind spots (the graph routes each row itself). A whole body uploaded as one sca
 people's scans with blind spots: 17.2 → 8.3 mm, ``benchmarks/decoder_blind_spots.py``). The
 loop is closed on the spectrum: the rebuilt body goes through the same solver workers as an
 upload, and its own spectrum comes back beside the one it was decoded from, so a client sees
-how far to trust it. A union of parts that do not
-cover the body is decoded all the same (the network's best guess of the person); the gap
-between the two spectra shows it.
+how far to trust it. A union of parts that do not cover the body is decoded all the same (the
+network's best guess of the person); the gap between the two spectra shows it.
 """
 
 from typing import Annotated, Literal
