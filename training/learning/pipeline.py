@@ -44,9 +44,9 @@ _REMESHED = TrainingPreset(
 )
 TRAINING_PRESETS = {
     "tiny": TrainingPreset(
-        UnionTraining(epochs=2, batch=8, chain_batch=2),
+        UnionTraining(epochs=2, batch=8, chain_batch=2, told_epochs=2, told_batch=16),
         LocalizerTraining(epochs=2, batch=16),
-        UnionConfig(disjoint_prior=True, overlap_hint=True),  # as the standard preset's
+        UnionConfig(disjoint_prior=True, overlap_hint=True, told_width=16),  # as the standard preset's
     ),
     # Sized for a 2-core CPU: the transformer correction takes ~2.5 min per epoch on one core (it
     # is launch-bound: small matrices, many operations), the localizers ~25 min in all. The
@@ -55,7 +55,16 @@ TRAINING_PRESETS = {
     # The served union operator reads the operands' disjoint union and, where a caller tells it, how
     # much of the smaller part lies inside the other (UnionConfig.overlap_hint; told for half the
     # training rows, with noise).
+    # Pairs told their overlap are answered by a network of their own (UnionConfig.told_width,
+    # train_union.train_told), trained after the correction in ~1 min.
     "standard": TrainingPreset(
+        UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0),
+        LocalizerTraining(epochs=8, batch=128, first_restart=8),
+        UnionConfig(disjoint_prior=True, overlap_hint=True, told_width=256),
+    ),
+    # The operator served before the told specialist (model 4c203f055a9e): the correction answers
+    # told pairs too.
+    "standard-one-network": TrainingPreset(
         UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0),
         LocalizerTraining(epochs=8, batch=128, first_restart=8),
         UnionConfig(disjoint_prior=True, overlap_hint=True),

@@ -7,7 +7,7 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("onnxscript")
 
 from training.learning.export import export_union, session  # noqa: E402
-from training.learning.union_net import UnionConfig, UnionMemory, UnionOperator  # noqa: E402
+from training.learning.union_net import ToldCorrection, UnionConfig, UnionMemory, UnionOperator  # noqa: E402
 
 
 def test_onnx_and_pytorch_retrieve_the_same_pairs_among_near_ties(tmp_path):
@@ -47,10 +47,12 @@ def test_onnx_and_pytorch_break_exact_ties_alike(tmp_path):
         assert np.abs(g - e).max() <= 1e-4 * np.abs(e).max()
 
 
-def test_an_operator_that_reads_the_overlap_exports_it_as_an_input(tmp_path):
+@pytest.mark.parametrize("specialist", [False, True])
+def test_an_operator_that_reads_the_overlap_exports_it_as_an_input(tmp_path, specialist):
     """The graph of an operator trained with the overlap hint takes ``overlap`` (batch, 1), told or
-    unknown per row, and answers as PyTorch does (random correction weights, so the hint matters);
-    one trained without it has no such input."""
+    unknown per row, and answers as PyTorch does (random correction weights, so the hint matters;
+    with ``specialist``, a told specialist of random weights answers the told rows); one trained
+    without it has no such input."""
     rng = np.random.default_rng(2)
     a, b = (np.cumsum(rng.uniform(1, 40, (300, 20)), axis=1) for _ in range(2))
     union = np.minimum(a, b) * 0.7
@@ -58,6 +60,8 @@ def test_an_operator_that_reads_the_overlap_exports_it_as_an_input(tmp_path):
         model = UnionOperator(UnionConfig(disjoint_prior=True, overlap_hint=hint), UnionMemory(a, b, union))
         torch.nn.init.normal_(model.correction.rho.weight, std=0.05)
         model.set_sigma_told(0.5)
+        if hint and specialist:
+            model.attach_told(ToldCorrection(20, 32))
         export_union(model.eval(), tmp_path / f"union-{hint}.onnx")
         graph = session(tmp_path / f"union-{hint}.onnx")
         assert ("overlap" in {node.name for node in graph.get_inputs()}) == hint

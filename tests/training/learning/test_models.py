@@ -11,6 +11,7 @@ from training.learning.union_net import (  # noqa: E402
     EPSILON,
     MONOTONE,
     PRIOR,
+    ToldCorrection,
     UnionConfig,
     UnionMemory,
     UnionOperator,
@@ -32,8 +33,9 @@ PARAMETRIZATIONS = (PRIOR, MONOTONE)
 # and weights that give every pair a weight of its own between 0 and 1.
 BLENDS = (None, (0.5, -2.0, 1.0, 0.3, 4.0))
 # What the correction reads beside the operands and the memory: nothing more, the operands' disjoint
-# union, or that and the overlap a caller tells (random shares, a third of them unknown).
-READS = ("plain", "disjoint", "told")
+# union, or that and the overlap a caller tells (random shares, a third of them unknown), the told
+# pairs answered by the correction or by a told specialist (ToldCorrection) of random weights.
+READS = ("plain", "disjoint", "told", "told_specialist")
 
 
 def told_overlaps(count: int, seed: int) -> torch.Tensor:
@@ -60,11 +62,16 @@ def operator(
         correction=correction,
         parametrization=parametrization,
         disjoint_prior=reads != "plain",
-        overlap_hint=reads == "told",
+        overlap_hint=reads.startswith("told"),
     )
     model = UnionOperator(config, memory)
     last = model.correction.rho if correction == "transformer" else model.correction.head[-1]
     torch.nn.init.normal_(last.weight, std=0.05)
+    if reads == "told_specialist":
+        specialist = ToldCorrection(20, 16)
+        for parameter in specialist.net.parameters():
+            torch.nn.init.normal_(parameter, std=0.15)
+        model.attach_told(specialist)
     if blend is not None:
         model.set_blend_weights(blend)
     model.set_sigma_told(0.6)
@@ -263,6 +270,22 @@ def test_a_told_overlap_reaches_the_union_and_an_unknown_one_is_not_told(correct
     assert torch.equal(nothing[0], unknown[0]) and torch.equal(nothing[1], unknown[1])
     assert (nested - apart).abs().max() > 1e-3 * apart.abs().max()
     assert torch.equal(ignored[0], plain(a, b)[0]) and torch.equal(ignored[1], plain(a, b)[1])
+
+
+def test_the_told_specialist_answers_the_told_pairs_and_only_them():
+    """With a told specialist attached, pairs told their overlap get its answer (another one than
+    the correction's), pairs not told get exactly the correction's; told 0 and told 1 differ."""
+    alone = operator("transformer", reads="told")
+    with_specialist = operator("transformer", reads="told_specialist")
+    a, b = spectra(16, 11), spectra(16, 12)
+    overlap = told_overlaps(16, 4)
+    known = overlap[:, 0] >= 0
+    with torch.no_grad():
+        first, second = alone(a, b, None, overlap), with_specialist(a, b, None, overlap)
+        nested, apart = (with_specialist(a, b, None, torch.full((16, 1), share))[0] for share in (1.0, 0.0))
+    assert torch.equal(first[0][~known], second[0][~known]) and torch.equal(first[1][~known], second[1][~known])
+    assert ((first[0][known] - second[0][known]).abs().amax(1) > 1e-4 * first[0][known].amax(1)).all()
+    assert (nested - apart).abs().max() > 1e-3 * apart.abs().max()
 
 
 def test_sigma_of_a_pair_told_its_overlap_takes_the_told_factor_above_its_floor():
