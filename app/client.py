@@ -168,6 +168,7 @@ class Client:
         *,
         top: int = 10,
         rebuild: bool = True,
+        profile: bool = True,
         units: Units = "m",
         scale: float | None = None,
         overlap: Sequence[float] | None = None,
@@ -176,8 +177,10 @@ class Client:
     ) -> RetrieveResponse:
         """The stored complete shapes nearest to the union of the operands; an open surface (a scan with
         holes) is ranked through the body the shape decoder rebuilds from it unless ``rebuild`` is False;
+        two operands whose overlap is not told, by their share profile unless ``profile`` is False;
         ``cap_holes``: one whole-body mesh, its holes capped first (ranked as the closed surface)."""
-        params = {"top": top, "rebuild": rebuild, **_union_params(units, scale, overlap, measure_overlap)}
+        params = {"top": top, "rebuild": rebuild, "profile": profile}
+        params |= _union_params(units, scale, overlap, measure_overlap)
         params |= _params(cap_holes=cap_holes or None)
         return RetrieveResponse(**self._operands("/v1/retrieve", files, spectra, params))
 

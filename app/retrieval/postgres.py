@@ -159,13 +159,22 @@ class PostgresStore:
         with self._connect() as connection:
             return connection.execute("DELETE FROM shapes WHERE id = %s", (shape_id,)).rowcount > 0
 
-    def nearest(self, spectrum: np.ndarray, top: int) -> list[Match]:
+    def nearest(self, spectra: np.ndarray, top: int) -> list[Match]:
+        """One k-NN through the GiST index per spectrum, merged: a shape among the ``top`` nearest
+        to any of them is among the ``top`` nearest to the one it is nearest to, so the merge of
+        each spectrum's ``top`` is exact."""
+        best: dict[str, Match] = {}
         with self._connect() as connection:
-            rows = connection.execute(
-                f"SELECT {COLUMNS}, features <-> cube(%s::float8[]) AS distance FROM shapes ORDER BY distance LIMIT %s",
-                (_features(spectrum), top),
-            ).fetchall()
-        return [Match(ShapeRecord(r[0], r[1], r[2], list(r[3]), r[4]), float(r[5])) for r in rows]
+            for query, spectrum in enumerate(np.atleast_2d(np.asarray(spectra, dtype=np.float64))):
+                rows = connection.execute(
+                    f"SELECT {COLUMNS}, features <-> cube(%s::float8[]) AS distance FROM shapes "
+                    "ORDER BY distance LIMIT %s",
+                    (_features(spectrum), top),
+                ).fetchall()
+                for r in rows:
+                    if r[0] not in best or float(r[5]) < best[r[0]].distance:
+                        best[r[0]] = Match(ShapeRecord(r[0], r[1], r[2], list(r[3]), r[4]), float(r[5]), query)
+        return sorted(best.values(), key=lambda match: match.distance)[:top]
 
 
 def _features(spectrum: np.ndarray) -> list[float]:

@@ -47,6 +47,7 @@ class ShapeRecord:
 class Match:
     record: ShapeRecord
     distance: float
+    query: int = 0  # which of the spectra asked for (``nearest``) the shape is nearest to
 
 
 class ShapeStore(Protocol):
@@ -59,7 +60,11 @@ class ShapeStore(Protocol):
     def count(self) -> int: ...
     def page(self, offset: int, limit: int) -> list[ShapeRecord]: ...
     def delete(self, shape_id: str) -> bool: ...
-    def nearest(self, spectrum: np.ndarray, top: int) -> list[Match]: ...
+    def nearest(self, spectra: np.ndarray, top: int) -> list[Match]:
+        """The ``top`` stored shapes nearest to a (k,) spectrum, or to any of (m, k) spectra:
+        each shape at its distance to the nearest of them (Match.query says which)."""
+        ...
+
     def ping(self) -> None: ...
     def close(self) -> None: ...
 
@@ -142,15 +147,16 @@ class SQLiteStore:
         with self._connect() as connection:
             return connection.execute("DELETE FROM shapes WHERE id = ?", (shape_id,)).rowcount > 0
 
-    def nearest(self, spectrum: np.ndarray, top: int) -> list[Match]:
+    def nearest(self, spectra: np.ndarray, top: int) -> list[Match]:
         with self._connect() as connection:
             rows = connection.execute("SELECT id, label, source, spectrum, created_at FROM shapes").fetchall()
         if not rows:
             return []
         stored = np.stack([np.frombuffer(row[3], dtype=np.float64) for row in rows])
-        distance = distances(np.asarray(spectrum, dtype=np.float64), stored)
+        each = np.stack([distances(query, stored) for query in np.atleast_2d(np.asarray(spectra, dtype=np.float64))])
+        query, distance = each.argmin(axis=0), each.min(axis=0)
         order = np.argsort(distance, kind="stable")[:top]
-        return [Match(_record(rows[i]), float(distance[i])) for i in order]
+        return [Match(_record(rows[i]), float(distance[i]), int(query[i])) for i in order]
 
 
 def _blob(spectrum: np.ndarray) -> bytes:

@@ -154,11 +154,15 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
     found = httpx.post(
         f"{base}/v1/retrieve", params={"top": 5}, data={"spectra": _session_spectra(base, scans)}, timeout=60
     )
-    shown = [item.text.split(" (")[0] for item in browser.find_elements(By.CSS_SELECTOR, "#matches li")]
-    assert shown == [match["label"] for match in found.json()["matches"]]  # the service's ranking, as it ranked
+    items = [item.text for item in browser.find_elements(By.CSS_SELECTOR, "#matches li")]
+    assert [item.split(" (")[0] for item in items] == [match["label"] for match in found.json()["matches"]]
+    for item, match in zip(items, found.json()["matches"], strict=True):  # the share a profile ranked it under
+        assert ("overlap" in item) == (match["share"] is not None)
+        assert match["share"] is None or item.endswith(f"overlap {match['share']:.1f})")
     matches_note = browser.find_element(By.ID, "matches-note")
     assert matches_note.get_attribute("data-ranked-by") == found.json()["ranked_by"]
-    assert matches_note.text == " ".join(found.json()["warnings"])
+    assert matches_note.text.startswith(" ".join(found.json()["warnings"]))
+    assert ("explains it best" in matches_note.text) == (found.json()["ranked_by"] == "share_profile")
     rebuilt = httpx.post(
         f"{base}/v1/reconstruct", params={"format": "ply"}, data={"spectra": _session_spectra(base, scans)}, timeout=60
     )

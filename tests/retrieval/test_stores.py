@@ -43,6 +43,21 @@ def test_nearest_matches_brute_force_ranking(store):
     np.testing.assert_allclose([m.distance for m in matches], np.sort(distances(query, stored))[:10], rtol=1e-9)
 
 
+def test_nearest_to_any_of_several_spectra_is_each_shape_at_its_nearest(store):
+    """Several queries (as /v1/retrieve's share profile asks): each stored shape ranked by its
+    distance to the nearest of them, and told which one, as a brute-force minimum says."""
+    stored = spectra(200, 3)
+    store.add_many([f"person-{i}" for i in range(200)], stored, "test")
+    queries = np.stack([stored[5] * 1.03, stored[60] * 0.97, stored[140] * 1.01, spectra(1, 4)[0]])
+    each = np.stack([distances(query, stored) for query in queries])
+    expected = np.argsort(each.min(axis=0), kind="stable")[:12]
+    matches = store.nearest(queries, 12)
+    assert [m.record.label for m in matches] == [f"person-{i}" for i in expected]
+    np.testing.assert_allclose([m.distance for m in matches], each.min(axis=0)[expected], rtol=1e-9)
+    assert [m.query for m in matches] == list(each.argmin(axis=0)[expected])
+    assert {m.query for m in matches} >= {0, 1, 2}  # every near query contributes its own shapes
+
+
 def test_seed_fills_only_an_empty_store(tmp_path, request):
     seed = spectra(4, 2)
     np.savez(tmp_path / "shapes.npz", labels=np.array(["a", "b", "c", "d"]), spectra=seed)

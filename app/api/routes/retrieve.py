@@ -9,6 +9,12 @@ comparable (``benchmarks/retrieval_open_surfaces.py``: complete scans with blind
 first 35 % of the time instead of 1 %). That costs a solve, so the route is admitted like an
 upload (``app.main``). A whole-body scan uploaded as a mesh does better still with
 ``cap_holes=true``: its blind spots capped, it is a closed surface and ranked as one (65 %).
+
+Two operands whose overlap is not told leave their union uncertain mostly through that one
+number: a closed union of two is ranked by its **share profile**, each stored shape at its
+distance to the nearest of the unions told each share of ``PROFILE_SHARES``, i.e. under the
+overlap that explains that shape best (the card's two-part union queries: the right person
+first 60 → 75 % of the time among the closed ones; told the true share, 80 %).
 """
 
 from typing import Annotated, Literal
@@ -31,14 +37,15 @@ from app.api.operands import (
 )
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.api.rebuilt import RebuiltBody, rebuilt_body
-from app.api.unions import union_of_operands
+from app.api.unions import UnionOutcome, union_of_operands
 from app.inference.body import open_surface
-from app.inference.models import SpectralModels, UnionEstimate
+from app.inference.models import PROFILE_SHARES, SpectralModels
+from app.retrieval.store import Match, ShapeStore
 
 router = APIRouter(tags=["retrieval"])
 ROUTE = "/retrieve"  # an open surface's query solves the body rebuilt from it: admitted like an upload (app.main)
 MAX_TOP = 100
-RankedBy = Literal["union", "rebuilt_body"]
+RankedBy = Literal["union", "rebuilt_body", "share_profile"]
 RETRIEVE_RESPONSES = success("retrieve") | problem_responses(
     *UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS | DATABASE_SLUGS
 )
@@ -48,16 +55,24 @@ class MatchOut(BaseModel):
     id: str = Field(description="The stored shape's id.")
     label: str = Field(description="Its identity label.")
     distance: float = Field(description="ShapeDNA distance: Euclidean on log λ₂…λ_k.")
+    share: float | None = Field(
+        default=None,
+        description="Ranked by share profile: the overlap share (of the smaller operand inside the other) under "
+        "which the union comes nearest to this shape; null otherwise.",
+    )
 
 
 class RetrieveResponse(BaseModel):
     query: list[float] = Field(description="The union spectrum of the operands, 1/m².")
     ranked_by: RankedBy = Field(
         description="union: the query itself was ranked (a closed surface, or rebuild=false); rebuilt_body: the "
-        "query is an open surface (λ₁ > 1 % of λ₂), ranked through the body the shape decoder rebuilds from it."
+        "query is an open surface (λ₁ > 1 % of λ₂), ranked through the body the shape decoder rebuilds from it; "
+        "share_profile: two operands whose overlap was not told, a closed union, each stored shape ranked by the "
+        "union told the share that brings it nearest (each match's share)."
     )
     looked_up: list[float] = Field(
-        description="The spectrum ranked against the stored shapes: the query's, or the rebuilt body's own."
+        description="The spectrum ranked against the stored shapes: the query's, the rebuilt body's own, or by "
+        "share profile the union told the first match's share."
     )
     matches: list[MatchOut] = Field(description="Nearest first.")
     warnings: list[str] = Field(
@@ -89,16 +104,43 @@ def open_surface_warning(rebuild: bool, body: RebuiltBody | None) -> str:
     )
 
 
-async def looked_up_spectrum(
-    request: Request, models: SpectralModels, union: UnionEstimate, rebuild: bool
+def profiled(outcome: UnionOutcome, models: SpectralModels, profile: bool) -> bool:
+    """Whether the union is ranked by its share profile: asked for, two operands, no overlap told
+    or measured, a graph that reads one, and a closed union (an open one goes through its rebuilt
+    body, and the store holds closed shapes)."""
+    untold = not outcome.overlaps and models.reads_overlap
+    return profile and untold and len(outcome.operands) == 2 and not open_surface(outcome.result.eigenvalues)
+
+
+async def looked_up_spectra(
+    request: Request, models: SpectralModels, outcome: UnionOutcome, rebuild: bool, profile: bool
 ) -> tuple[np.ndarray, RankedBy, list[str]]:
-    """The spectrum to rank, how it was chosen, and the warnings that go with it."""
+    """The spectrum, or (m, k) spectra, to rank, how they were chosen, and the warnings that go
+    with them."""
+    union = outcome.result
+    if profiled(outcome, models, profile):
+        a, b = (np.asarray(o.eigenvalues, dtype=np.float64) for o in outcome.operands)
+        return await anyio.to_thread.run_sync(models.union_profile, a, b), "share_profile", []
     if not open_surface(union.eigenvalues):
         return union.eigenvalues, "union", []
     if not rebuild or models.decoder_session is None:
         return union.eigenvalues, "union", [open_surface_warning(rebuild, None)]
     body = await rebuilt_body(request, models, union)
     return body.eigenvalues, "rebuilt_body", [open_surface_warning(rebuild, body)]
+
+
+def match_out(match: Match, ranked_by: RankedBy) -> MatchOut:
+    share = float(PROFILE_SHARES[match.query]) if ranked_by == "share_profile" else None
+    return MatchOut(id=match.record.id, label=match.record.label, distance=match.distance, share=share)
+
+
+async def ranked(
+    store: ShapeStore, looked_up: np.ndarray, ranked_by: RankedBy, top: int
+) -> tuple[list[MatchOut], np.ndarray]:
+    """The ``top`` matches, and the spectrum the first of them was found by."""
+    matches = await anyio.to_thread.run_sync(store.nearest, looked_up, top)
+    first = np.atleast_2d(looked_up)[matches[0].query] if matches else np.atleast_2d(looked_up)[0]
+    return [match_out(m, ranked_by) for m in matches], first
 
 
 @router.post(
@@ -126,17 +168,25 @@ async def retrieve(
         ),
     ] = True,
     cap_holes: CapHolesQuery = False,
+    profile: Annotated[
+        bool,
+        Query(
+            description="Two operands whose overlap is not told (no overlap, no measure_overlap): rank each stored "
+            "shape under the share that brings the union nearest to it; false ranks the untold union itself."
+        ),
+    ] = True,
 ) -> RetrieveResponse:
-    """The stored complete shapes nearest to the union of the operands (an open one through its rebuilt body)."""
+    """The stored complete shapes nearest to the union of the operands (an open one through its rebuilt body,
+    two operands whose overlap is not told by their share profile)."""
     outcome = await union_of_operands(
         request, settings, models, files, spectra, units, scale, overlap, measure_overlap, cap_holes
     )
-    looked_up, ranked_by, notes = await looked_up_spectrum(request, models, outcome.result, rebuild)
-    matches = await anyio.to_thread.run_sync(store.nearest, looked_up, top)
+    looked_up, ranked_by, notes = await looked_up_spectra(request, models, outcome, rebuild, profile)
+    matches, first = await ranked(store, looked_up, ranked_by, top)
     return RetrieveResponse(
         query=outcome.result.eigenvalues.tolist(),
         ranked_by=ranked_by,
-        looked_up=looked_up.tolist(),
-        matches=[MatchOut(id=m.record.id, label=m.record.label, distance=m.distance) for m in matches],
+        looked_up=first.tolist(),
+        matches=matches,
         warnings=[*outcome.warnings, *notes],
     )

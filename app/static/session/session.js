@@ -212,12 +212,16 @@ function showMatches(found) {
   // How the service ranked (the union, or the body rebuilt from an open one) and what it means.
   const note = $("matches-note");
   note.dataset.rankedBy = found.ranked_by;
-  note.textContent = found.warnings.join(" ");
+  const profiled = found.ranked_by === "share_profile"
+    ? "Two scans whose overlap was not measured: each stored body is ranked under the overlap that explains it best."
+    : "";
+  note.textContent = [...found.warnings, profiled].filter(Boolean).join(" ");
   note.classList.toggle("warning", found.warnings.some((warning) => warning.includes("not an identification")));
   $("matches").replaceChildren(
     ...found.matches.map((match) => {
       const li = document.createElement("li");
-      li.textContent = `${match.label} (distance ${match.distance.toFixed(3)})`;
+      const share = match.share === null ? "" : `, overlap ${match.share.toFixed(1)}`;
+      li.textContent = `${match.label} (distance ${match.distance.toFixed(3)}${share})`;
       return li;
     }),
   );
