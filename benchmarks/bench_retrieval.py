@@ -9,7 +9,9 @@ is (all eigenvalues by 1/s²) and perturbed per eigenvalue by 2 %, as other peop
 build would be. At each size it reports the insert rate of the last batches, the time to
 rebuild PostgreSQL's GiST index over every row, and the latency of ``nearest(query, 10)`` as
 the service calls it (a connection per call included) over perturbed stored spectra: p50 and
-p99 of as many queries as ``--budget`` seconds allow, up to ``--queries``. PostgreSQL's plan is
+p99 of as many queries as ``--budget`` seconds allow, up to ``--queries``; and of
+``nearest`` asked for a share profile's 11 spectra at once, as ``/v1/retrieve`` asks for two
+operands whose overlap is not told. PostgreSQL's plan is
 checked to use the index (``EXPLAIN ANALYZE``), and both backends must return the same
 distances for the same rows.
 """
@@ -22,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import psycopg
 
+from app.inference.models import PROFILE_SHARES
 from app.retrieval.distance import features
 from app.retrieval.postgres import PostgresStore
 from app.retrieval.seed import SEED_FILE
@@ -52,8 +55,16 @@ def fill(store: ShapeStore, spectra: np.ndarray, batch: int) -> float:
     return sum(rows[-10:]) / sum(seconds[-10:]) if seconds else float("nan")
 
 
+def share_profile(query: np.ndarray) -> np.ndarray:
+    """(len(PROFILE_SHARES), k) spectra standing for a query's share profile (``/v1/retrieve``
+    with two operands untold asks ``nearest`` for all of them at once): the query lowered by up
+    to 30 % along the shares, as a union's eigenvalues fall the more the parts add."""
+    return np.stack([query * (1 - 0.3 * share) for share in PROFILE_SHARES])
+
+
 def latencies(store: ShapeStore, queries: np.ndarray, budget: float) -> list[float]:
-    """Milliseconds per ``nearest`` call, for as many queries as the budget allows (at least 3)."""
+    """Milliseconds per ``nearest`` call, for as many queries as the budget allows (at least 3);
+    ``queries`` (n, k), or (n, m, k) for calls with m spectra each."""
     out: list[float] = []
     deadline = time.perf_counter() + budget
     for query in queries:
@@ -108,8 +119,12 @@ def main() -> None:
         url = server.url
     folder = Path(tempfile.mkdtemp(prefix="bench-retrieval-"))
     stores: dict[str, ShapeStore] = {"SQLite": SQLiteStore(folder / "shapes.db"), "PostgreSQL": PostgresStore(url)}
-    print("| backend | rows | insert rows/s | GiST rebuild s | index used | k-NN p50 ms | p99 ms | queries |")
-    print("|---|---|---|---|---|---|---|---|")
+    profiles = np.stack([share_profile(query) for query in queries])
+    print(
+        "| backend | rows | insert rows/s | GiST rebuild s | index used | k-NN p50 ms | p99 ms | queries "
+        f"| share profile ({len(PROFILE_SHARES)} spectra) p50 ms | p99 ms | queries |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     try:
         filled = 0
         for size in sorted(args.sizes):
@@ -117,14 +132,17 @@ def main() -> None:
             for name, store in stores.items():
                 rate = fill(store, rows[filled:size], args.batch)
                 times = latencies(store, queries, args.budget)
+                profiled = latencies(store, profiles, args.budget)
                 answers[name] = [m.distance for m in store.nearest(queries[0], TOP)]
+                answers[name] += [m.distance for m in store.nearest(profiles[0], TOP)]
                 rebuild, used = "—", "—"
                 if name == "PostgreSQL":
                     seconds, uses = postgres_index(url, queries[0])
                     rebuild, used = f"{seconds:.1f}", "yes" if uses else "NO"
                 print(
                     f"| {name} | {size:,} | {rate:,.0f} | {rebuild} | {used} | {percentile(times, 50):.1f} "
-                    f"| {percentile(times, 99):.1f} | {len(times)} |",
+                    f"| {percentile(times, 99):.1f} | {len(times)} | {percentile(profiled, 50):.1f} "
+                    f"| {percentile(profiled, 99):.1f} | {len(profiled)} |",
                     flush=True,
                 )
             filled = size
