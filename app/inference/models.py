@@ -120,7 +120,7 @@ def _session(path: Path, threads: int) -> ort.InferenceSession:
 # The overlap shares tried for two operands whose share is not told (SpectralModels.union_profile):
 # two part spectra do not tell how much the parts overlap, but a stored shape does, as the share
 # under which the union comes nearest to it. Eleven rank as well as 21 or 41 (top-1 74.4, 74.6,
-# 74.6 % on the card's closed two-part union queries; `benchmarks/retrieval_open_surfaces.py`).
+# 74.6 % on the card's closed two-part union queries; benchmarks/RESULTS.md, "share profile").
 PROFILE_SHARES = np.linspace(0.0, 1.0, 11)
 
 

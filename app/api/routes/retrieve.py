@@ -14,7 +14,8 @@ Two operands whose overlap is not told leave their union uncertain mostly throug
 number: a closed union of two is ranked by its **share profile**, each stored shape at its
 distance to the nearest of the unions told each share of ``PROFILE_SHARES``, i.e. under the
 overlap that explains that shape best (the card's two-part union queries: the right person
-first 60 → 75 % of the time among the closed ones; told the true share, 80 %).
+first 60 → 74 % of the time among the closed ones, 57 → 70 % over all of them as ranked; told
+the true share, 77 %; ``benchmarks/retrieval_open_surfaces.py``).
 """
 
 from typing import Annotated, Literal
