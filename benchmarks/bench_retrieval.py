@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import psycopg
 
-from app.inference.models import PROFILE_SHARES
+from app.contract import PROFILE_SHARES
 from app.retrieval.distance import features
 from app.retrieval.postgres import PostgresStore
 from app.retrieval.seed import SEED_FILE

@@ -25,8 +25,9 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from app.contract import PROFILE_SHARES
 from app.inference.body import open_surface
-from app.inference.models import PROFILE_SHARES, SpectralModels
+from app.inference.models import SpectralModels
 from app.retrieval.distance import distances
 from training.benchmark_arguments import benchmark_parser
 from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION

@@ -18,6 +18,7 @@ from app.contract import (
     LOCALIZER_FILE,
     LOCALIZER_INPUTS,
     MASK_THRESHOLD,
+    PROFILE_SHARES,
     RECONSTRUCTION_FILE,
     RECONSTRUCTION_INPUTS,
     UNION_FILE,
@@ -115,13 +116,6 @@ def _session(path: Path, threads: int) -> ort.InferenceSession:
     options.intra_op_num_threads = threads
     options.inter_op_num_threads = 1
     return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-
-
-# The overlap shares tried for two operands whose share is not told (SpectralModels.union_profile):
-# two part spectra do not tell how much the parts overlap, but a stored shape does, as the share
-# under which the union comes nearest to it. Eleven rank as well as 21 or 41 (top-1 74.4, 74.6,
-# 74.6 % on the card's closed two-part union queries; benchmarks/RESULTS.md, "share profile").
-PROFILE_SHARES = np.linspace(0.0, 1.0, 11)
 
 
 class SpectralModels:

@@ -12,11 +12,11 @@ import json
 import numpy as np
 import pytest
 
+from app.contract import PROFILE_SHARES
 from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
 from app.geometry.topology import drop_unreferenced
-from app.inference.models import PROFILE_SHARES
 from app.inference.template import Template
 
 TOP = 8

@@ -305,6 +305,8 @@ def render(metrics: dict, command: str) -> str:
         "### Identity retrieval (Table 4)",
         "Queries: the full-coverage test pairs (every group and variant); database: every complete posed body",
         "of the benchmark except the query's own shape (ShapeDNA: each complete shape against the others).",
+        "`operator_union_share_profile`: the same unions untold, each stored shape at its distance to the nearest",
+        "of the unions told each share 0, 0.1, …, 1 (as `/v1/retrieve` ranks two operands whose union is closed).",
         "",
         *retrieval_table(metrics),
         END,

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.contract import LOCALIZER_FILE, UNION_FILE
+from app.contract import LOCALIZER_FILE, PROFILE_SHARES, UNION_FILE
 from app.inference.manifest import write_manifest
 from app.retrieval.seed import SEED_FILE
 from training.learning.baselines import elementwise_min, larger_part
@@ -208,7 +208,8 @@ def run_pipeline(
 
 def retrieval_queries(data: SpectralData, union) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Full-coverage test pairs (every variant): their predicted union (and, for an operator that
-    reads it, their union told their overlap) and two part-only baselines."""
+    reads it, their union told their overlap, and their share profile: (n, shares, k)) and two
+    part-only baselines."""
     pairs = data.pairs
     rows = pairs.rows(
         np.flatnonzero((pairs.split != "train") & (pairs.split != "validation") & (pairs.scenario == "full"))
@@ -222,4 +223,7 @@ def retrieval_queries(data: SpectralData, union) -> dict[str, tuple[np.ndarray, 
     if union.config.overlap_hint:  # the same pairs, each told how much its parts overlap
         told = data.overlap_shares(rows.mask_a, rows.mask_b)
         queries["operator_union_told"] = (predict(union, rows.a, rows.b, overlap=told)[0], rows.shape_a)
+        # Untold, by share profile: each stored shape under the share that brings the union nearest.
+        profile = [predict(union, rows.a, rows.b, overlap=np.full(len(rows.a), c))[0] for c in PROFILE_SHARES]
+        queries["operator_union_share_profile"] = (np.stack(profile, axis=1), rows.shape_a)
     return queries

@@ -51,10 +51,12 @@ def save_seed(path: Path, labels: np.ndarray, spectra: np.ndarray) -> None:
 def hit_rates(
     queries: np.ndarray, query_identity: np.ndarray, excluded: np.ndarray, spectra: np.ndarray, identity: np.ndarray
 ) -> dict[str, float]:
-    """Top-1/5/10 identity hit rates; ``excluded[i]`` is the stored shape query i may not match."""
+    """Top-1/5/10 identity hit rates; ``excluded[i]`` is the stored shape query i may not match.
+    ``queries`` (n, k), or (n, m, k): each stored shape at its distance to the nearest of a
+    query's m spectra (a share profile, as ``/v1/retrieve`` ranks two operands untold)."""
     hits = np.array(
         [
-            identity_hits(distances(query, spectra), person, skip, identity)
+            identity_hits(np.min([distances(q, spectra) for q in np.atleast_2d(query)], axis=0), person, skip, identity)
             for query, person, skip in zip(queries, query_identity, excluded, strict=True)
         ],
         dtype=bool,

@@ -39,8 +39,9 @@ from app.api.operands import (
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.api.rebuilt import RebuiltBody, rebuilt_body
 from app.api.unions import UnionOutcome, union_of_operands
+from app.contract import PROFILE_SHARES
 from app.inference.body import open_surface
-from app.inference.models import PROFILE_SHARES, SpectralModels
+from app.inference.models import SpectralModels
 from app.retrieval.store import Match, ShapeStore
 
 router = APIRouter(tags=["retrieval"])
