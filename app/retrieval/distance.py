@@ -21,3 +21,11 @@ def distances(query: np.ndarray, spectra: np.ndarray) -> np.ndarray:
     if len(spectra) == 0:
         return np.zeros(0)
     return np.linalg.norm(features(spectra) - features(query), axis=1)
+
+
+def nearest_of(queries: np.ndarray, spectra: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(m,) each of (m, k) stored spectra at its distance to the nearest of one (k,) or several
+    (n, k) query spectra, and (m,) which query that is: how a share profile ranks (``/v1/retrieve``
+    with two operands whose overlap is not told)."""
+    each = np.stack([distances(query, spectra) for query in np.atleast_2d(np.asarray(queries, dtype=np.float64))])
+    return each.min(axis=0), each.argmin(axis=0)

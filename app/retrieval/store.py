@@ -17,7 +17,7 @@ from typing import Protocol
 
 import numpy as np
 
-from app.retrieval.distance import distances
+from app.retrieval.distance import nearest_of
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS shapes (
@@ -153,8 +153,7 @@ class SQLiteStore:
         if not rows:
             return []
         stored = np.stack([np.frombuffer(row[3], dtype=np.float64) for row in rows])
-        each = np.stack([distances(query, stored) for query in np.atleast_2d(np.asarray(spectra, dtype=np.float64))])
-        query, distance = each.argmin(axis=0), each.min(axis=0)
+        distance, query = nearest_of(spectra, stored)
         order = np.argsort(distance, kind="stable")[:top]
         return [Match(_record(rows[i]), float(distance[i]), int(query[i])) for i in order]
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.retrieval.distance import distances
+from app.retrieval.distance import nearest_of
 from training.data.spectra import MESH, task_spectrum
 from training.learning.data import SpectralData
 
@@ -56,7 +56,7 @@ def hit_rates(
     query's m spectra (a share profile, as ``/v1/retrieve`` ranks two operands untold)."""
     hits = np.array(
         [
-            identity_hits(np.min([distances(q, spectra) for q in np.atleast_2d(query)], axis=0), person, skip, identity)
+            identity_hits(nearest_of(query, spectra)[0], person, skip, identity)
             for query, person, skip in zip(queries, query_identity, excluded, strict=True)
         ],
         dtype=bool,
