@@ -110,8 +110,8 @@ class Client:
         return FootprintedReport(**body) if footprint else SpectrumReport(**body)
 
     def overlap(self, footprints: Sequence[str]) -> OverlapResponse:
-        """Each union step's overlap of registered views, from their footprint tokens (the union
-        so far's ``union_footprint`` may stand for all the earlier ones)."""
+        """Each union step's overlap and boundary share of registered views, from their footprint
+        tokens (the union so far's ``union_footprint`` may stand for all the earlier ones)."""
         field = [("footprints", (None, json.dumps(list(footprints))))]  # multipart: 1 MiB a field
         return OverlapResponse(**self._post("/v1/overlap", {}, files=field, data=None))
 
@@ -123,11 +123,13 @@ class Client:
         units: Units = "m",
         scale: float | None = None,
         overlap: Sequence[float] | None = None,
+        boundary: Sequence[float] | None = None,
         measure_overlap: bool = False,
     ) -> UnionResponse:
         """The union's spectrum and its 90 % interval; files first, then spectra, folded left to right;
-        ``overlap`` (one share per union step) where known, or ``measure_overlap`` for registered uploads."""
-        params = _union_params(units, scale, overlap, measure_overlap)
+        ``overlap`` (one share per union step) where known, with ``boundary`` (each step's boundary share)
+        where that is known too, or ``measure_overlap`` for registered uploads."""
+        params = _union_params(units, scale, overlap, boundary, measure_overlap)
         return UnionResponse(**self._operands("/v1/union", files, spectra, params))
 
     def localize(
@@ -138,10 +140,11 @@ class Client:
         units: Units = "m",
         scale: float | None = None,
         overlap: Sequence[float] | None = None,
+        boundary: Sequence[float] | None = None,
         measure_overlap: bool = False,
     ) -> LocalizeResponse:
         """The union, its region on the template body and the covered share of each body part."""
-        params = _union_params(units, scale, overlap, measure_overlap)
+        params = _union_params(units, scale, overlap, boundary, measure_overlap)
         return LocalizeResponse(**self._operands("/v1/localize", files, spectra, params))
 
     def reconstruct(
@@ -152,13 +155,14 @@ class Client:
         units: Units = "m",
         scale: float | None = None,
         overlap: Sequence[float] | None = None,
+        boundary: Sequence[float] | None = None,
         measure_overlap: bool = False,
         cap_holes: bool = False,
     ) -> ReconstructResponse:
         """The person's body rebuilt from the union's spectrum (rest pose, template topology), with
         its height, area and its own spectrum as the check; ``cap_holes``: one whole-body mesh,
         its holes capped first."""
-        params = _union_params(units, scale, overlap, measure_overlap) | _params(cap_holes=cap_holes or None)
+        params = _union_params(units, scale, overlap, boundary, measure_overlap) | _params(cap_holes=cap_holes or None)
         return ReconstructResponse(**self._operands("/v1/reconstruct", files, spectra, params))
 
     def retrieve(
@@ -172,6 +176,7 @@ class Client:
         units: Units = "m",
         scale: float | None = None,
         overlap: Sequence[float] | None = None,
+        boundary: Sequence[float] | None = None,
         measure_overlap: bool = False,
         cap_holes: bool = False,
     ) -> RetrieveResponse:
@@ -180,7 +185,7 @@ class Client:
         two operands whose overlap is not told, by their share profile unless ``profile`` is False;
         ``cap_holes``: one whole-body mesh, its holes capped first (ranked as the closed surface)."""
         params = {"top": top, "rebuild": rebuild, "profile": profile}
-        params |= _union_params(units, scale, overlap, measure_overlap)
+        params |= _union_params(units, scale, overlap, boundary, measure_overlap)
         params |= _params(cap_holes=cap_holes or None)
         return RetrieveResponse(**self._operands("/v1/retrieve", files, spectra, params))
 
@@ -243,7 +248,10 @@ def _params(**values: object) -> dict:
     return {key: value for key, value in values.items() if value is not None}
 
 
-def _union_params(units: Units, scale: float | None, overlap: Sequence[float] | None, measure: bool) -> dict:
-    """The union-based routes' query parameters: units, and the overlap told or to be measured."""
-    told = ",".join(repr(float(share)) for share in overlap) if overlap is not None else None
-    return _params(units=units, scale=scale, overlap=told, measure_overlap=measure or None)
+def _union_params(
+    units: Units, scale: float | None, overlap: Sequence[float] | None, boundary: Sequence[float] | None, measure: bool
+) -> dict:
+    """The union-based routes' query parameters: units, and the overlap (and boundary share) told
+    or to be measured."""
+    told, edge = (",".join(repr(float(x)) for x in v) if v is not None else None for v in (overlap, boundary))
+    return _params(units=units, scale=scale, overlap=told, boundary=edge, measure_overlap=measure or None)

@@ -15,6 +15,12 @@ UNION_INPUTS = ("spectrum_a", "spectrum_b")  # float32 (batch, k), eigenvalues i
 # caller knows it; UNKNOWN_OVERLAP where not. Graphs exported before it have no such input.
 UNION_OVERLAP_INPUT = "overlap"
 UNKNOWN_OVERLAP = -1.0
+# float32 (batch, 1): the boundary share, how much of the two parts' boundary length is left on
+# their union's boundary (0 … 1: 0 closed, 1 neither covers any of the other's boundary), where
+# the caller knows it besides the overlap; UNKNOWN_BOUNDARY where not. Read with the overlap
+# only (a pair not told its overlap ignores it). Graphs exported before it have no such input.
+UNION_BOUNDARY_INPUT = "boundary"
+UNKNOWN_BOUNDARY = -1.0
 UNION_OUTPUTS = ("union", "sigma")  # float32 (batch, k): the union's eigenvalues and their σ
 LOCALIZER_INPUTS = ("spectrum",)  # float32 (batch, k)
 LOCALIZER_OUTPUTS = ("probability",)  # float32 (batch, template vertices)
@@ -47,10 +53,14 @@ def spectrum_definition() -> dict[str, int]:
     return {"version": SPECTRUM_VERSION, "max_hole_edges": MAX_HOLE_EDGES}
 
 
-def union_feeds(a: np.ndarray, b: np.ndarray, overlap: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """The union graph's inputs for operands of shape (batch, k), and the overlap (batch, 1) for a
-    graph that reads one (None for one that does not)."""
+def union_feeds(
+    a: np.ndarray, b: np.ndarray, overlap: np.ndarray | None = None, boundary: np.ndarray | None = None
+) -> dict[str, np.ndarray]:
+    """The union graph's inputs for operands of shape (batch, k), the overlap (batch, 1) for a
+    graph that reads one (None for one that does not), and the boundary share likewise."""
     feeds = {UNION_INPUTS[0]: a.astype(np.float32), UNION_INPUTS[1]: b.astype(np.float32)}
     if overlap is not None:
         feeds[UNION_OVERLAP_INPUT] = np.asarray(overlap, dtype=np.float32).reshape(-1, 1)
+    if boundary is not None:
+        feeds[UNION_BOUNDARY_INPUT] = np.asarray(boundary, dtype=np.float32).reshape(-1, 1)
     return feeds

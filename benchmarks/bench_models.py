@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 
-from app.contract import UNKNOWN_OVERLAP, union_feeds
-from app.inference.models import reads_overlap
+from app.contract import UNKNOWN_BOUNDARY, UNKNOWN_OVERLAP, union_feeds
+from app.inference.models import reads_boundary, reads_overlap
 
 REPEATS = 50
 
@@ -45,7 +45,7 @@ def main() -> None:
     bodies = np.load(args.models / "shapes.npz")["spectra"].astype(np.float32)
     rng = np.random.default_rng(0)
     union, localizer = session(args.models / "union.onnx"), session(args.models / "localizer.onnx")
-    told_unknown = reads_overlap(union)
+    told_unknown, boundary_unknown = reads_overlap(union), reads_boundary(union)
     for name in ("union.onnx", "localizer.onnx"):
         print(f"{name:16s} {(args.models / name).stat().st_size / 2**20:6.2f} MiB")
     for batch in (1, 256):
@@ -53,7 +53,8 @@ def main() -> None:
         a = np.sort(bodies[rows[0]] * rng.uniform(1.2, 3.0, (batch, 1)), axis=1).astype(np.float32)
         b = np.sort(bodies[rows[1]] * rng.uniform(1.2, 3.0, (batch, 1)), axis=1).astype(np.float32)
         told = np.full(batch, UNKNOWN_OVERLAP) if told_unknown else None  # as the service feeds it, untold
-        feeds = union_feeds(a, b, told)
+        edge = np.full(batch, UNKNOWN_BOUNDARY) if boundary_unknown else None
+        feeds = union_feeds(a, b, told, edge)
         union_ms = median_ms(lambda feeds=feeds: union.run(None, feeds))
         localizer_ms = median_ms(lambda a=a: localizer.run(None, {"spectrum": a}))
         print(f"batch {batch:4d}: union {union_ms:8.2f} ms   localizer {localizer_ms:8.2f} ms")

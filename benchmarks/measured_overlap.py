@@ -8,12 +8,14 @@ registered views are): each view's part mesh is rebuilt in that pose (re-meshed 
 re-meshed rows, as the data build does), its overlap measured as ``measure_overlap`` does
 (:mod:`app.geometry.overlap`), and set against the share from the template's areas. Then the
 served union operator's mean relative error untold, told the true share, and told the measured
-one. Needs the data set's ``work/shapes.npy`` (the posed bodies); a random subset of ``--rows``.
+one; for models that read it, told the measured share and boundary share too (the boundary share
+set against the template's edges: :meth:`SpectralData.boundary_shares`). Needs the data set's
+``work/shapes.npy`` (the posed bodies); a random subset of ``--rows``.
 
 Then Test C's chains of consecutive views (one posed body each) as the session page sends them:
 each view's footprint token, each step measured from the union so far's token and the next
-view's (``POST /v1/overlap``), the chain folded untold, told the true shares and told the
-measured ones.
+view's (``POST /v1/overlap``), the chain folded untold, told the true shares, told the
+measured ones, and told the measured shares and boundary shares.
 """
 
 import numpy as np
@@ -26,7 +28,6 @@ from app.geometry.overlap import (
     footprint_of,
     footprint_token,
     measured_fold,
-    measured_overlaps,
 )
 from app.geometry.topology import boundary_vertex_mask
 from training.benchmark_arguments import benchmark_parser
@@ -61,19 +62,20 @@ def main() -> None:
     bodies = np.load(args.data / "work" / "shapes.npy", mmap_mode="r")
     faces = data.template.faces
     true = data.overlap_shares(rows.mask_a, rows.mask_b)
-    measured = np.array(
-        [
-            measured_overlaps(
-                [
-                    footprint(
-                        np.asarray(bodies[shape], dtype=np.float64), faces, data.masks(np.array([m]))[0], v, args.points
-                    )
-                    for m in (mask_a, mask_b)
-                ]
-            )[0]
-            for shape, mask_a, mask_b, v in zip(rows.shape_a, rows.mask_a, rows.mask_b, rows.variant, strict=True)
-        ]
-    )
+    true_boundary = data.boundary_shares(rows.mask_a, rows.mask_b, rows.mask_union)
+    folds = [
+        measured_fold(
+            [
+                footprint(
+                    np.asarray(bodies[shape], dtype=np.float64), faces, data.masks(np.array([m]))[0], v, args.points
+                )
+                for m in (mask_a, mask_b)
+            ]
+        )
+        for shape, mask_a, mask_b, v in zip(rows.shape_a, rows.mask_a, rows.mask_b, rows.variant, strict=True)
+    ]
+    measured = np.array([fold.overlaps[0] for fold in folds])
+    boundary = np.array([fold.boundaries[0] for fold in folds])
     union, _ = served_predictors(args.models)
     told = served_told_predictor(args.models)
     if told is None:
@@ -83,66 +85,75 @@ def main() -> None:
         "told the true share": told(rows.a, rows.b, true)[0],
         "told the measured share": told(rows.a, rows.b, measured)[0],
     }
+    if told.reads_boundary:
+        answers["told the measured share and boundary share"] = told(rows.a, rows.b, measured, boundary)[0]
     columns = " | ".join(f"{name} mre" for name in answers)
-    print(f"| kind / variant | n | share measured − true: mean abs / p95 / bias | {columns} |")
-    print("|---" * (3 + len(answers)) + "|")
+    print(
+        "| kind / variant | n | share measured − true: mean abs / p95 / bias | boundary share measured − true: "
+        f"mean abs / p95 / bias | {columns} |"
+    )
+    print("|---" * (4 + len(answers)) + "|")
     for variant in (MESH, REMESHED):
         for kind in (None, *np.unique(rows.scenario)):
             selected = (rows.variant == variant) & ((rows.scenario == kind) if kind else True)
             if not selected.any():
                 continue
-            gap = measured[selected] - true[selected]
+            gaps = (measured[selected] - true[selected], boundary[selected] - true_boundary[selected])
             truth = rows.union[selected]
             cells = " | ".join(f"{100 * spectral_errors(p[selected], truth)['mre']:.1f} %" for p in answers.values())
-            print(
-                f"| {kind or 'all'} / {variant} | {selected.sum()} | {np.abs(gap).mean():.3f} / "
-                f"{np.quantile(np.abs(gap), 0.95):.3f} / {gap.mean():+.3f} | {cells} |"
-            )
+            print(f"| {kind or 'all'} / {variant} | {selected.sum()} | {' | '.join(map(_gap, gaps))} | {cells} |")
     session_chains(data, bodies, union, told)
+
+
+def _gap(gap: np.ndarray) -> str:
+    """A measured − true column: mean absolute, 95th percentile absolute, mean."""
+    return f"{np.abs(gap).mean():.3f} / {np.quantile(np.abs(gap), 0.95):.3f} / {gap.mean():+.3f}"
 
 
 def session_chains(data: SpectralData, bodies: np.ndarray, union, told) -> None:
     """Test C's chains measured through footprint tokens step by step, as the session page does."""
     chains = data.chains
     faces = data.template.faces
-    token_shares = []
+    token_shares, token_boundaries = [], []
     for shape, masks in zip(chains.shape, chains.view_masks, strict=True):
         body = np.asarray(bodies[shape], dtype=np.float64)
         tokens = [
             footprint_token(footprint(body, faces, data.masks(np.array([m]))[0], MESH, FOOTPRINT_POINTS)) for m in masks
         ]
-        shares, so_far = [], tokens[0]
+        shares, boundaries, so_far = [], [], tokens[0]
         for token in tokens[1:]:
-            (share,), union_so_far = measured_fold([footprint_from_token(so_far), footprint_from_token(token)])
-            shares.append(share)
-            so_far = footprint_token(union_so_far)
+            fold = measured_fold([footprint_from_token(so_far), footprint_from_token(token)])
+            shares += fold.overlaps
+            boundaries += fold.boundaries
+            so_far = footprint_token(fold.union)
         token_shares.append(shares)
+        token_boundaries.append(boundaries)
     views = chains.views
-    true = data.chain_shares()
-    measured = np.array(token_shares)
-    current = {
-        "untold": views[:, 0],
-        "told the true shares": views[:, 0],
-        "told the token-measured shares": views[:, 0],
+    true, true_boundary = data.chain_shares(), data.chain_boundaries()
+    measured, boundary = np.array(token_shares), np.array(token_boundaries)
+    steps = {
+        "untold": lambda current, step: union(current, views[:, step])[0],
+        "told the true shares": lambda current, step: told(current, views[:, step], true[:, step - 1])[0],
+        "told the token-measured shares": lambda current, step: told(current, views[:, step], measured[:, step - 1])[0],
     }
+    if told.reads_boundary:
+        steps["told the token-measured shares and boundary shares"] = lambda current, step: told(
+            current, views[:, step], measured[:, step - 1], boundary[:, step - 1]
+        )[0]
+    current = dict.fromkeys(steps, views[:, 0])
     print(
-        f"\n| chain length | n | share measured − true: mean abs / bias | {' | '.join(f'{n} mre' for n in current)} |"
+        "\n| chain length | n | share measured − true: mean abs / p95 / bias | boundary share measured − true: "
+        f"mean abs / p95 / bias | {' | '.join(f'{n} mre' for n in current)} |"
     )
-    print("|---" * (3 + len(current)) + "|")
+    print("|---" * (4 + len(current)) + "|")
     for step in range(1, views.shape[1]):
-        current = {
-            "untold": union(current["untold"], views[:, step])[0],
-            "told the true shares": told(current["told the true shares"], views[:, step], true[:, step - 1])[0],
-            "told the token-measured shares": told(
-                current["told the token-measured shares"], views[:, step], measured[:, step - 1]
-            )[0],
-        }
+        current = {name: advance(current[name], step) for name, advance in steps.items()}
         if step < 2:
             continue
-        gap = measured[:, :step] - true[:, :step]
+        gaps = (measured[:, :step] - true[:, :step], boundary[:, :step] - true_boundary[:, :step])
         truth = chains.unions[:, step - 1]
         cells = " | ".join(f"{100 * spectral_errors(p, truth)['mre']:.1f} %" for p in current.values())
-        print(f"| {step + 1} | {len(truth)} | {np.abs(gap).mean():.3f} / {gap.mean():+.3f} | {cells} |")
+        print(f"| {step + 1} | {len(truth)} | {' | '.join(map(_gap, gaps))} | {cells} |")
 
 
 if __name__ == "__main__":

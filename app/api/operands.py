@@ -12,7 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from fastapi import File, Form, Query, Request, UploadFile
+from fastapi import Depends, File, Form, Query, Request, UploadFile
 
 from app.api import form_json
 from app.api.problems import ProblemError
@@ -65,20 +65,54 @@ MeasureOverlapQuery = Annotated[
     bool,
     Query(
         description="The uploaded files are views of one body in one coordinate frame and one pose (a scanner's "
-        "registered views): measure the overlap of each union step from them instead of being told it "
-        "(app.geometry.overlap). Every operand must be an uploaded file; not with overlap.",
+        "registered views): measure the overlap and the boundary share of each union step from them instead of "
+        "being told them (app.geometry.overlap). Every operand must be an uploaded file; not with overlap.",
+    ),
+]
+BoundaryQuery = Annotated[
+    str | None,
+    Query(
+        description="Beside overlap, where the client knows it (/v1/overlap measures it from registered views): "
+        "how much of the two operands' boundary length is left on their union's boundary, 0 to 1 (0: the union "
+        "is closed; 1: neither covers any of the other's boundary), one per union step, comma-separated, e.g. "
+        "0.55. With the overlap it tells the union's boundary length besides its area: a view that closes a "
+        "session's holes adds little area but much of the spectrum's fall. Omit it when unknown.",
+        max_length=4096,
+        examples=["0.55"],
     ),
 ]
 
 
-def parse_overlaps(text: str | None) -> list[float] | None:
-    """The ``overlap`` query parameter as one share per union step (None: not told)."""
+@dataclass(frozen=True)
+class Told:
+    """What a request tells of its union steps: the overlap and boundary shares as sent (text;
+    None where not told), or that they are to be measured from the uploads."""
+
+    overlap: str | None = None
+    boundary: str | None = None
+    measure: bool = False
+
+
+def told_query(
+    overlap: OverlapQuery = None, boundary: BoundaryQuery = None, measure_overlap: MeasureOverlapQuery = False
+) -> Told:
+    """The union routes' three query parameters on what is told of each step, as one."""
+    return Told(overlap, boundary, measure_overlap)
+
+
+ToldDep = Annotated[Told, Depends(told_query)]
+NOT_TOLD = Told()
+
+
+def parse_shares(text: str | None, name: str = "overlap") -> list[float] | None:
+    """A comma-separated query parameter of shares (``overlap``, ``boundary``) as one number per
+    union step (None: not told); ranges are checked against the operands later."""
     if text is None:
         return None
     try:
         return [float(value) for value in text.split(",")]
     except ValueError:
-        raise InvalidOverlap(f"overlap must be comma-separated numbers, got {text[:40]!r}") from None
+        raise InvalidOverlap(f"{name} must be comma-separated numbers, got {text[:40]!r}") from None
 
 
 @dataclass(frozen=True)

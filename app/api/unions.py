@@ -12,14 +12,15 @@ import numpy as np
 from fastapi import Request, UploadFile
 
 from app.api.metrics import INFERENCE
-from app.api.operands import Operand, parse_overlaps, resolve_operands
+from app.api.operands import NOT_TOLD, Operand, Told, parse_shares, resolve_operands
 from app.core.config import Settings
-from app.geometry.overlap import measured_overlaps
+from app.geometry.overlap import measured_fold
 from app.geometry.plausibility import size_warnings
 from app.inference.models import (
     InvalidOverlap,
     SpectralModels,
     UnionEstimate,
+    checked_boundaries,
     checked_overlaps,
     require_overlap_reader,
 )
@@ -35,6 +36,7 @@ class UnionOutcome:
     inference_ms: float
     warnings: list[str]
     overlaps: list[float]  # each union step's overlap as told or measured; empty when neither
+    boundaries: list[float]  # each step's boundary share as told or measured; empty when neither
 
     def fields(self, models: SpectralModels) -> dict:
         """The response fields every union-based endpoint shares."""
@@ -49,6 +51,7 @@ class UnionOutcome:
             "inference_ms": round(self.inference_ms, 2),
             "warnings": self.warnings,
             "overlaps": self.overlaps,
+            "boundaries": self.boundaries,
         }
 
 
@@ -60,20 +63,20 @@ async def union_of_operands(
     spectra: str | None,
     units: Literal["m", "cm", "mm"],
     scale: float | None,
-    overlap: str | None = None,
-    measure_overlap: bool = False,
+    told: Told = NOT_TOLD,
     cap_holes: bool = False,
 ) -> UnionOutcome:
     """Resolve the operands (solving uploaded files) and fold them through the union operator,
-    told the overlap of each step where the client knows it, or measured from the uploads
-    (``measure_overlap``: views in one frame and pose); ``cap_holes``: one uploaded whole-body
-    scan, its holes capped (:func:`app.api.operands.resolve_operands`)."""
-    overlaps = parse_overlaps(overlap)
-    if measure_overlap:
-        _check_measurable(overlaps, spectra, models)
+    told the overlap (and boundary share) of each step where the client knows it, or measured
+    from the uploads (``told.measure``: views in one frame and pose); ``cap_holes``: one uploaded
+    whole-body scan, its holes capped (:func:`app.api.operands.resolve_operands`)."""
+    overlaps, boundaries = parse_shares(told.overlap), parse_shares(told.boundary, "boundary")
+    if told.measure:
+        _check_measurable(overlaps, boundaries, spectra, models)
 
-    def check_overlaps(count: int) -> list[float]:
-        return checked_overlaps(overlaps, count, models.reads_overlap)
+    def check_overlaps(count: int) -> None:
+        checked_overlaps(overlaps, count, models.reads_overlap)
+        checked_boundaries(boundaries, overlaps, count, models.reads_boundary)
 
     operands, solve_ms = await resolve_operands(
         request,
@@ -84,27 +87,30 @@ async def union_of_operands(
         units,
         scale,
         check_overlaps,
-        footprints=measure_overlap,
+        footprints=told.measure,
         cap_holes=cap_holes,
     )
-    if measure_overlap:  # k-d trees of up to UNION_POINTS points per step: off the event loop
+    if told.measure:  # k-d trees of up to UNION_POINTS points per step: off the event loop
         footprints = [o.footprint for o in operands if o.footprint is not None]
-        overlaps = await anyio.to_thread.run_sync(measured_overlaps, footprints)
+        fold = await anyio.to_thread.run_sync(measured_fold, footprints)
+        overlaps, boundaries = fold.overlaps, fold.boundaries if models.reads_boundary else None
     started = time.perf_counter()
     values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
-    result = await anyio.to_thread.run_sync(models.union, values, overlaps)
+    result = await anyio.to_thread.run_sync(models.union, values, overlaps, boundaries)
     seconds = time.perf_counter() - started
     INFERENCE.labels("union").observe(seconds)
     warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]
     warnings += size_warnings(values, [o.source for o in operands])
-    return UnionOutcome(operands, result, solve_ms, seconds * 1e3, warnings, overlaps or [])
+    return UnionOutcome(operands, result, solve_ms, seconds * 1e3, warnings, overlaps or [], boundaries or [])
 
 
-def _check_measurable(told: list[float] | None, spectra: str | None, models: SpectralModels) -> None:
+def _check_measurable(
+    overlaps: list[float] | None, boundaries: list[float] | None, spectra: str | None, models: SpectralModels
+) -> None:
     """Before anything is solved: a measured overlap needs every operand uploaded (a spectrum has
-    no geometry), no told one beside it, and models that read it."""
-    if told is not None:
-        raise InvalidOverlap("give overlap or measure_overlap, not both")
+    no geometry), no told one (nor boundary share) beside it, and models that read it."""
+    if overlaps is not None or boundaries is not None:
+        raise InvalidOverlap("give overlap (and boundary) or measure_overlap, not both")
     if spectra is not None and spectra.strip():
         raise InvalidOverlap("measure_overlap measures uploaded files; spectra operands have no geometry to measure")
     require_overlap_reader(models.reads_overlap)

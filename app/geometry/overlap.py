@@ -111,31 +111,74 @@ def _near_edge(points: Footprint, selected: np.ndarray, reach: np.ndarray) -> np
     return distance <= reach[selected]
 
 
+def _edge_left(points: Footprint, other: Footprint, tolerance: float) -> np.ndarray:
+    """How much of each of ``points``' edge points stays on the edge of its union with ``other``:
+    0 where ``other``'s surface (an inner point) is within reach, which covers it; EDGE_SHARE
+    where the nearest point within reach is on ``other``'s edge too (the views stop at one place,
+    as a re-scan of one region does: that stretch of edge is counted once, half from each side);
+    1 where ``other`` is not within reach. 0 for the points not on the edge."""
+    left = np.zeros(len(points.points))
+    if not points.edge.any():
+        return left
+    bound = max(tolerance, float(points.spread.max(initial=0.0)), float(other.spread.max(initial=0.0)))
+    distance, nearest = cKDTree(other.points).query(points.points[points.edge], distance_upper_bound=bound)
+    found = np.isfinite(distance)
+    reach = np.full(len(distance), tolerance)
+    reach[found] = np.maximum(tolerance, np.maximum(points.spread[points.edge][found], other.spread[nearest[found]]))
+    near = found & (distance <= reach)
+    left[points.edge] = np.where(near, np.where(other.edge[np.where(near, nearest, 0)], EDGE_SHARE, 0.0), 1.0)
+    return left
+
+
+def _edge_length(footprint: Footprint, left: np.ndarray | None = None) -> float:
+    """The length (m) of a footprint's edge, or of the part ``left`` of it: each edge point stands
+    for √(its area) of edge, the spacing of the mesh around it."""
+    weight = footprint.edge if left is None else left
+    return float(np.sqrt(footprint.weights.astype(np.float64)) @ weight)
+
+
+@dataclass(frozen=True)
+class MeasuredFold:
+    """What registered views tell of each step of the left fold ((A ∪ B) ∪ C) ∪ …: the overlap
+    (share of the smaller operand inside the other), the boundary share (how much of the two
+    operands' edge length is left on the union's edge: 0 closed, 1 neither covers any of the
+    other's edge) and the footprint of the union of all the views (thinned to UNION_POINTS)."""
+
+    overlaps: list[float]
+    boundaries: list[float]
+    union: Footprint
+
+
 def measured_overlaps(views: list[Footprint]) -> list[float]:
     """The share of the smaller operand inside the other at each step of the left fold
     ((A ∪ B) ∪ C) ∪ …: the views so far (their union, each point counted once) against the next.
     0 … 1 per step, ``len(views) − 1`` of them."""
-    return measured_fold(views)[0]
+    return measured_fold(views).overlaps
 
 
-def measured_fold(views: list[Footprint]) -> tuple[list[float], Footprint]:
-    """:func:`measured_overlaps`, and the footprint of the union of all the views (thinned to
-    UNION_POINTS): what a client sends instead of the earlier views when the next one comes."""
-    shares = []
+def measured_fold(views: list[Footprint]) -> MeasuredFold:
+    """:func:`measured_overlaps`, each step's boundary share, and the footprint of the union of
+    all the views: what a client sends instead of the earlier views when the next one comes."""
+    shares, boundaries = [], []
     so_far = views[0]
     for view in views[1:]:
         tolerance = max(so_far.spacing, view.spacing, MIN_TOLERANCE_M)
         of_next, of_so_far = _inside(view, so_far, tolerance), _inside(so_far, view, tolerance)
         shared = (view.weights @ of_next + so_far.weights @ of_so_far) / 2
         shares.append(float(np.clip(shared / min(so_far.area, view.area), 0.0, 1.0)))
+        left_so_far, left_next = _edge_left(so_far, view, tolerance), _edge_left(view, so_far, tolerance)
+        edges = _edge_length(so_far) + _edge_length(view)
+        kept = _edge_length(so_far, left_so_far) + _edge_length(view, left_next)
+        boundaries.append(float(np.clip(kept / edges, 0.0, 1.0)) if edges > 0 else 0.0)
         added = of_next == 0  # the next view's points outside the union so far join it
-        # The union's edge: the views' edge points that the other view does not cover.
-        edge = np.concatenate([so_far.edge & (of_so_far < 1), view.edge[added]])
+        # The union's edge: the views' edge points that the other view does not cover (where both
+        # stop at one place, the union stops there too: the union so far's point stays).
+        edge = np.concatenate([left_so_far > 0, view.edge[added]])
         points = np.concatenate([so_far.points, view.points[added]])
         weights = np.concatenate([so_far.weights, view.weights[added]])
         spread = np.concatenate([so_far.spread, view.spread[added]])
         so_far = footprint_of(points, weights, UNION_POINTS, spread, edge)
-    return shares, so_far
+    return MeasuredFold(shares, boundaries, so_far)
 
 
 def footprint_token(footprint: Footprint) -> str:

@@ -21,8 +21,10 @@ from app.contract import (
     PROFILE_SHARES,
     RECONSTRUCTION_FILE,
     RECONSTRUCTION_INPUTS,
+    UNION_BOUNDARY_INPUT,
     UNION_FILE,
     UNION_OVERLAP_INPUT,
+    UNKNOWN_BOUNDARY,
     UNKNOWN_OVERLAP,
     union_feeds,
 )
@@ -61,6 +63,11 @@ def reads_overlap(union_graph: ort.InferenceSession) -> bool:
     return UNION_OVERLAP_INPUT in {node.name for node in union_graph.get_inputs()}
 
 
+def reads_boundary(union_graph: ort.InferenceSession) -> bool:
+    """Whether a union graph takes the boundary share (graphs exported before it do not)."""
+    return UNION_BOUNDARY_INPUT in {node.name for node in union_graph.get_inputs()}
+
+
 def require_overlap_reader(readable: bool) -> None:
     """An overlap, told or to be measured, is refused by models that cannot read it."""
     if not readable:
@@ -80,6 +87,29 @@ def checked_overlaps(overlaps: list[float] | None, operands: int, readable: bool
         if not 0.0 <= value <= 1.0:  # NaN fails too
             raise InvalidOverlap(f"overlap[{i}] is {value}: a share of the smaller part, from 0 to 1")
     return list(overlaps)
+
+
+def checked_boundaries(
+    boundaries: list[float] | None, overlaps: list[float] | None, operands: int, readable: bool
+) -> list[float]:
+    """One boundary share per union step, each in 0 … 1, told only beside the steps' overlaps
+    (the boundary share refines a told overlap; alone it says nothing the models read); unknown
+    for every step when none are given."""
+    if boundaries is None:
+        return [UNKNOWN_BOUNDARY] * max(operands - 1, 0)
+    if overlaps is None:
+        raise InvalidOverlap("boundary is read beside overlap: give both, one of each per union step")
+    if not readable:
+        raise InvalidOverlap("the served union operator does not read boundary shares; send the request without them")
+    if len(boundaries) != operands - 1:
+        steps = operands - 1
+        raise InvalidOverlap(
+            f"{len(boundaries)} boundary shares for {operands} operands: give one per union step ({steps})"
+        )
+    for i, value in enumerate(boundaries):
+        if not 0.0 <= value <= 1.0:  # NaN fails too
+            raise InvalidOverlap(f"boundary[{i}] is {value}: a share of the two operands' boundary length, from 0 to 1")
+    return list(boundaries)
 
 
 @dataclass(frozen=True)
@@ -129,6 +159,7 @@ class SpectralModels:
         self.localizer_session = _session(directory / LOCALIZER_FILE, threads)
         self.k = int(self.union_session.get_inputs()[0].shape[1])
         self.reads_overlap = reads_overlap(self.union_session)  # older graphs answer unions without it
+        self.reads_boundary = reads_boundary(self.union_session)
         vertex_count = self.localizer_session.get_outputs()[0].shape[1]
         if vertex_count != len(self.template.vertices):
             raise ValueError(f"localizer predicts {vertex_count} vertices, template has {len(self.template.vertices)}")
@@ -146,16 +177,22 @@ class SpectralModels:
         digest = hashlib.sha256(b"".join((directory / name).read_bytes() for name in served))
         self.version = digest.hexdigest()[:12]  # content hash: two replicas agree iff they serve the same models
 
-    def union(self, spectra: list[np.ndarray], overlaps: list[float] | None = None) -> UnionEstimate:
+    def union(
+        self, spectra: list[np.ndarray], overlaps: list[float] | None = None, boundaries: list[float] | None = None
+    ) -> UnionEstimate:
         """Union of the spectra, folded left to right: ((A ∪ B) ∪ C) ∪ …, as trained; one is
         returned as is. σ carries each inner union's uncertainty on (:func:`chained_sigma`).
         ``overlaps``, one per step where the caller knows them: the share of the smaller operand
-        inside the other (the union so far and the next operand); see :func:`checked_overlaps`."""
+        inside the other (the union so far and the next operand); see :func:`checked_overlaps`.
+        ``boundaries`` beside them: each step's boundary share (:func:`checked_boundaries`)."""
         steps = checked_overlaps(overlaps, len(spectra), self.reads_overlap)
+        edges = checked_boundaries(boundaries, overlaps, len(spectra), self.reads_boundary)
         current, sigma = spectra[0].astype(np.float64), np.zeros(self.k)
-        for other, overlap in zip(spectra[1:], steps, strict=True):
+        for other, overlap, edge in zip(spectra[1:], steps, edges, strict=True):
             told = np.array([overlap]) if self.reads_overlap else None
-            union, step_sigma = self.union_session.run(None, union_feeds(current[None], other[None], told))
+            boundary = np.array([edge]) if self.reads_boundary else None
+            feeds = union_feeds(current[None], other[None], told, boundary)
+            union, step_sigma = self.union_session.run(None, feeds)
             sigma = chained_sigma(current, sigma, union[0].astype(np.float64), step_sigma[0].astype(np.float64))
             current = union[0].astype(np.float64)
         _require_finite(current, sigma)
@@ -169,7 +206,8 @@ class SpectralModels:
         require_overlap_reader(self.reads_overlap)
         count = len(PROFILE_SHARES)
         batch = np.repeat(a[None], count, axis=0), np.repeat(b[None], count, axis=0)
-        union, _ = self.union_session.run(None, union_feeds(*batch, PROFILE_SHARES))
+        boundary = np.full(count, UNKNOWN_BOUNDARY) if self.reads_boundary else None
+        union, _ = self.union_session.run(None, union_feeds(*batch, PROFILE_SHARES, boundary))
         _require_finite(union)
         return union.astype(np.float64)
 

@@ -178,8 +178,8 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
 
 def test_a_registered_session_measures_each_scan_s_overlap_and_tells_the_union(base, scans, browser):
     """With "registered scans" (the two parts are views of the template in one frame): the page
-    shows the overlap /v1/overlap measures from the API's own footprint tokens, and the coverage
-    it shows is that of the union told that overlap, not the untold one."""
+    shows the overlap and boundary share /v1/overlap measures from the API's own footprint tokens,
+    and the coverage it shows is that of the union told them, not the untold one."""
     _drop_one_at_a_time(browser, base, scans, registered=True)
     assert browser.find_element(By.ID, "registered").get_attribute("disabled") is not None
 
@@ -190,11 +190,14 @@ def test_a_registered_session_measures_each_scan_s_overlap_and_tells_the_union(b
         for p in scans
     ]
     tokens = json.dumps([view["footprint"] for view in views])
-    (share,) = httpx.post(f"{base}/v1/overlap", data={"footprints": tokens}, timeout=60).json()["overlaps"]
+    measured = httpx.post(f"{base}/v1/overlap", data={"footprints": tokens}, timeout=60).json()
+    (share,), (boundary,) = measured["overlaps"], measured["boundaries"]
     second = browser.find_elements(By.CSS_SELECTOR, "#parts li")[1]
     assert second.get_attribute("data-overlap") == f"{share:.4f}"
+    assert second.get_attribute("data-boundary") == f"{boundary:.4f}"
     spectra = json.dumps([view["eigenvalues"] for view in views])
-    told = httpx.post(f"{base}/v1/localize", params={"overlap": share}, data={"spectra": spectra}, timeout=60).json()
+    params = {"overlap": share, "boundary": boundary}
+    told = httpx.post(f"{base}/v1/localize", params=params, data={"spectra": spectra}, timeout=60).json()
     untold = _expected_region(base, scans)
     shown = {
         item.get_attribute("data-part"): float(item.get_attribute("data-coverage"))

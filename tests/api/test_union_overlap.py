@@ -1,4 +1,5 @@
-"""Unions told how much their operands overlap (``overlap``, one share per union step)."""
+"""Unions told how much their operands overlap (``overlap``, one share per union step) and how much of
+their boundary is left on the union's (``boundary``, beside it)."""
 
 import json
 
@@ -6,9 +7,9 @@ import numpy as np
 import pytest
 from prometheus_client import REGISTRY
 
-from app.contract import UNKNOWN_OVERLAP
+from app.contract import UNKNOWN_BOUNDARY, UNKNOWN_OVERLAP
 from app.geometry.overlap import WIRE_POINTS, footprint_of, footprint_token
-from app.inference.models import InvalidOverlap, checked_overlaps
+from app.inference.models import InvalidOverlap, checked_boundaries, checked_overlaps
 from app.inference.template import PART_NAMES
 from app.samples import PARTS as SAMPLE_PARTS
 from app.samples import sample_overlap, template_part
@@ -23,9 +24,13 @@ def nested(template):  # noqa: F811 (the fixture)
     return spectrum(region(template, LEGS)), spectrum(region(template, LEGS + LEFT_ARM))
 
 
-def union(client, spectra, overlaps=None):
-    params = None if overlaps is None else {"overlap": ",".join(map(str, overlaps))}
-    return client.post("/v1/union", data={"spectra": json.dumps(spectra)}, params=params)
+def union(client, spectra, overlaps=None, boundaries=None):
+    params = {}
+    if overlaps is not None:
+        params["overlap"] = ",".join(map(str, overlaps))
+    if boundaries is not None:
+        params["boundary"] = ",".join(map(str, boundaries))
+    return client.post("/v1/union", data={"spectra": json.dumps(spectra)}, params=params or None)
 
 
 def test_overlaps_are_one_share_per_step_or_unknown_for_every_step():
@@ -44,10 +49,60 @@ def test_overlaps_are_one_share_per_step_or_unknown_for_every_step():
             checked_overlaps(overlaps, operands, readable)
 
 
-def test_the_served_operator_reads_the_overlap(client):
-    assert client.app.state.resources.require_models().reads_overlap
+def test_boundary_shares_are_one_per_step_beside_the_overlaps_or_unknown_for_every_step():
+    assert checked_boundaries(None, None, 3, readable=True) == [UNKNOWN_BOUNDARY, UNKNOWN_BOUNDARY]
+    assert checked_boundaries(None, [0.5], 2, readable=False) == [UNKNOWN_BOUNDARY]
+    assert checked_boundaries([0.0, 1.0], [0.5, 0.5], 3, readable=True) == [0.0, 1.0]
+    for boundaries, overlaps, operands, readable in (
+        ([0.5], None, 2, True),  # read beside a told overlap only
+        ([0.5], [0.5], 2, False),  # a graph without the input cannot be told
+        ([0.5, 0.5], [0.5], 2, True),
+        ([float("nan")], [0.5], 2, True),
+        ([-0.1], [0.5], 2, True),
+        ([1.5], [0.5], 2, True),
+    ):
+        with pytest.raises(InvalidOverlap):
+            checked_boundaries(boundaries, overlaps, operands, readable)
+
+
+def test_the_served_operator_reads_the_overlap_and_the_boundary_share(client):
+    models = client.app.state.resources.require_models()
+    assert models.reads_overlap and models.reads_boundary
     route = client.get("/openapi.json").json()["paths"]["/v1/union"]["post"]
-    assert "overlap" in {parameter["name"] for parameter in route["parameters"]}
+    assert {"overlap", "boundary", "measure_overlap"} <= {parameter["name"] for parameter in route["parameters"]}
+    assert client.get("/v1/models").json()["told"] == ["overlap", "boundary"]
+
+
+@pytest.mark.parametrize(
+    ("params", "named"),
+    [
+        ({"overlap": "0.5", "boundary": "0.5,0.5"}, "boundary"),
+        ({"overlap": "0.5", "boundary": "nan"}, "boundary"),
+        ({"overlap": "0.5", "boundary": "1.5"}, "boundary"),
+        ({"overlap": "0.5", "boundary": "open"}, "boundary"),
+        ({"boundary": "0.5"}, "beside overlap"),
+    ],
+)
+def test_a_wrong_boundary_share_is_a_422_problem_naming_it(client, nested, params, named):
+    response = client.post("/v1/union", data={"spectra": json.dumps(list(nested))}, params=params)
+    assert response.status_code == 422, response.text
+    assert response.json()["type"] == "/problems/invalid-overlap" and named in response.json()["detail"]
+
+
+@pytest.mark.parametrize("share", [0.0, 0.4, 1.0])
+@pytest.mark.parametrize("boundary", [0.0, 0.6, 1.0])
+def test_a_union_told_its_boundary_share_keeps_the_laws(client, nested, share, boundary):
+    """Told any overlap and boundary share: commutative, never above either part, and one spectrum
+    twice is itself; told it, the answer is another one than told the overlap alone."""
+    larger, smaller = nested
+    ab = union(client, [larger, smaller], [share], [boundary]).json()
+    ba = union(client, [smaller, larger], [share], [boundary]).json()
+    assert ab["eigenvalues"] == ba["eigenvalues"] and ab["sigma"] == ba["sigma"]
+    assert ab["boundaries"] == [boundary] and ab["overlaps"] == [share]
+    assert np.all(np.array(ab["eigenvalues"]) <= np.minimum(larger, smaller) * (1 + 1e-6))
+    itself = union(client, [smaller, smaller], [share], [boundary]).json()
+    np.testing.assert_allclose(itself["eigenvalues"], smaller, rtol=1e-5)
+    assert ab["eigenvalues"] != union(client, [larger, smaller], [share]).json()["eigenvalues"]
 
 
 @pytest.mark.parametrize("overlap", ["0.5,0.5", "nan", "-0.2", "2", "half", "", "0.5,"])
@@ -129,10 +184,13 @@ def test_uploads_in_one_frame_have_their_overlap_measured(client, template):  # 
     assert measured.status_code == 200, measured.text
     (share,) = measured.json()["overlaps"]
     assert share == pytest.approx(sample_overlap(template), abs=0.02)
+    (boundary,) = measured.json()["boundaries"]
+    assert boundary <= 0.02  # their union is the closed body: each part's edge lies inside the other
     spectra = [operand["eigenvalues"] for operand in measured.json()["operands"]]
-    told = union(client, spectra, [share]).json()
+    told = union(client, spectra, [share], [boundary]).json()
     np.testing.assert_allclose(measured.json()["eigenvalues"], told["eigenvalues"], rtol=1e-5)
-    assert told["overlaps"] == pytest.approx([share]) and union(client, spectra).json()["overlaps"] == []
+    assert told["overlaps"] == pytest.approx([share]) and told["boundaries"] == pytest.approx([boundary])
+    assert union(client, spectra).json()["overlaps"] == [] and union(client, spectra).json()["boundaries"] == []
 
 
 def test_a_part_inside_another_is_measured_whole(client, template):  # noqa: F811
@@ -142,11 +200,15 @@ def test_a_part_inside_another_is_measured_whole(client, template):  # noqa: F81
     assert response.json()["overlaps"] == pytest.approx([1.0], abs=0.01)
 
 
-@pytest.mark.parametrize("extra", [{"overlap": "0.5"}, {"spectra": "[[1,2,3]]"}], ids=["told too", "a spectrum"])
+@pytest.mark.parametrize(
+    "extra",
+    [{"overlap": "0.5"}, {"boundary": "0.5"}, {"spectra": "[[1,2,3]]"}],
+    ids=["told too", "boundary told too", "a spectrum"],
+)
 def test_a_measured_overlap_needs_uploads_alone_and_is_refused_before_solving(client, template, extra):  # noqa: F811
     upload = ply_bytes(region(template, LEGS))
     files = [("files", ("a.ply", upload)), ("files", ("b.ply", upload))]
-    params = {"measure_overlap": "true", **{k: v for k, v in extra.items() if k == "overlap"}}
+    params = {"measure_overlap": "true", **{k: v for k, v in extra.items() if k != "spectra"}}
     data = {k: v for k, v in extra.items() if k == "spectra"}
     before = _solves()
     response = client.post("/v1/union", params=params, data=data, files=files)
@@ -169,25 +231,30 @@ def measured(client, tokens: list[str]):
 def test_views_sent_one_by_one_have_the_overlap_the_uploads_together_have(client, template):  # noqa: F811
     """The README's two sample parts posted one at a time: their tokens (each part thinned from
     ~10 000 vertices to 4 096 points) measure about the share that measure_overlap measures on
-    the two uploads and the template's faces give (0.923, 0.941 and 0.9405 measured), and told that
-    share the union is as close to the truth, the whole body (λ₂…λ₂₀ measured 14.1 % off told the
-    token's share, 16.6 % measured from the uploads; untold 8.2 %: two parts whose union closes
-    the surface are a case the operator answers better untold: the README says so)."""
+    the two uploads and the template's faces give (0.923, 0.941 and 0.9405 measured), and a
+    boundary share of about 0 (their union is the closed body: each part's edge lies inside the
+    other; measured 0.000 from both). Told both, the union is as close to the truth, the whole
+    body, as measured from the uploads (λ₂…λ₂₀ 10.9 and 11.4 % off), and closer than told the
+    share alone (21.7 %: two parts whose union closes the surface are what the boundary share
+    tells; untold 8.2 %, which the README says)."""
     uploads = [(name, template_part(template, removed)) for name, removed in SAMPLE_PARTS.items()]
     views = [footprinted(client, name, upload) for name, upload in uploads]
     answer = measured(client, [v["footprint"] for v in views])
     assert answer.status_code == 200, answer.text
-    (share,) = answer.json()["overlaps"]
+    (share,), (boundary,) = answer.json()["overlaps"], answer.json()["boundaries"]
     together = client.post("/v1/union", params={"measure_overlap": "true"}, files=[("files", u) for u in uploads])
     assert share == pytest.approx(together.json()["overlaps"][0], abs=0.03)
     assert share == pytest.approx(sample_overlap(template), abs=0.03)
+    assert boundary == pytest.approx(together.json()["boundaries"][0], abs=0.02) and boundary <= 0.02
     body = np.array(spectrum(region(template, ())))
     spectra = [v["eigenvalues"] for v in views]
 
     def error(values: list[float]) -> float:
         return float((np.abs(np.array(values) - body) / body)[1:].mean())
 
-    assert error(union(client, spectra, [share]).json()["eigenvalues"]) <= error(together.json()["eigenvalues"]) + 0.01
+    both = error(union(client, spectra, [share], [boundary]).json()["eigenvalues"])
+    assert both <= error(together.json()["eigenvalues"]) + 0.01
+    assert both < error(union(client, spectra, [share]).json()["eigenvalues"])
 
 
 def test_a_session_measured_view_by_view_through_the_union_token_is_the_fold(client, template):  # noqa: F811

@@ -101,11 +101,34 @@ def test_a_chain_told_view_by_view_through_the_union_s_token_measures_what_all_a
     """[0, 2], [1, 3], then [2.5, 3.5]: the second step measured from the first step's union
     token and the third view alone is the fold's (a half each time)."""
     views = [view(2, 1, 40), view(2, 1, 47, shift=1.0), view(1, 1, 40, shift=2.5)]
-    first, union = measured_fold(views[:2])
-    assert union.area == pytest.approx(3.0, rel=0.03)  # the shared metre counted once
-    (second,) = measured_overlaps([footprint_from_token(footprint_token(union)), views[2]])
-    assert [*first, second] == pytest.approx(measured_overlaps(views), abs=0.02)
-    assert [*first, second] == pytest.approx([0.5, 0.5], abs=0.03)
+    first = measured_fold(views[:2])
+    assert first.union.area == pytest.approx(3.0, rel=0.03)  # the shared metre counted once
+    second = measured_fold([footprint_from_token(footprint_token(first.union)), views[2]])
+    whole = measured_fold(views)
+    assert first.overlaps + second.overlaps == pytest.approx(whole.overlaps, abs=0.02)
+    assert first.overlaps + second.overlaps == pytest.approx([0.5, 0.5], abs=0.03)
+    assert first.boundaries + second.boundaries == pytest.approx(whole.boundaries, abs=0.02)
+
+
+# Boundary shares L(∂(A ∪ B)) / (L(∂A) + L(∂B)) of rectangles, by hand: where both views stop at one
+# place (a shared stretch of border) the union stops there too, and that stretch counts once.
+@pytest.mark.parametrize(
+    ("views", "expected"),
+    [
+        ((view(2, 1, 40), view(2, 1, 47, shift=1.0)), [8 / 12]),  # [0, 3] × [0, 1] of two 6 m borders
+        ((view(2, 1, 40), view(2, 1, 57)), [6 / 12]),  # one region scanned twice, meshed apart
+        ((view(3, 1, 40), view(1, 0.6, 63, shift=1.0)), [8 / 11.2]),  # inside, on the larger's bottom border
+        ((view(3, 1, 40), view(1, 1, 40, shift=3.5)), [1.0]),  # apart: every border stays
+        ((view(2, 1, 40), view(2, 1, 47, shift=1.0), view(1, 1, 40, shift=2.5)), [8 / 12, 9 / 12]),  # a chain
+    ],
+)
+def test_boundary_shares_of_rectangles_are_their_borders_lengths(views, expected):
+    assert measured_fold(list(views)).boundaries == pytest.approx(expected, abs=0.03)
+
+
+def test_views_without_an_edge_have_a_closed_union():
+    closed = [replace(v, edge=np.zeros_like(v.edge)) for v in (view(2, 1, 40), view(2, 1, 40, shift=1.0))]
+    assert measured_fold(closed).boundaries == [0.0]
 
 
 def _token(rows: np.ndarray) -> str:

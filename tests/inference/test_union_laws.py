@@ -33,6 +33,10 @@ WHOLE_BODY = 0.0094
 # 72d5281c3617 (2026-12-04): measured means 0.00280, 0.00276, < 5e-6 (the told correction before
 # it: 0.00290, 0.01144, 0.00130).
 SAME_REGION_TOLD, ABSORPTION_TOLD, WHOLE_BODY_TOLD = 0.0031, 0.0031, 1e-4
+# Told the boundary share too (each case's own from the template's edges; ½ for a region twice, 0
+# with the closed body), answered by the boundary specialist since model 81d6c5f0fc06 (2026-12-04):
+# measured means 0.00280, 0.00177, < 5e-6 (worst 0.00701, 0.00965, 1e-5).
+SAME_REGION_BOUNDARY, ABSORPTION_BOUNDARY, WHOLE_BODY_BOUNDARY = 0.0031, 0.0020, 1e-4
 
 
 @pytest.fixture(scope="module")
@@ -77,3 +81,15 @@ def test_told_the_overlap_the_laws_hold_closer(laws):
     assert np.mean(laws["absorption_told"]) <= ABSORPTION_TOLD
     assert np.mean(laws["whole_body_told"]) <= WHOLE_BODY_TOLD and max(laws["whole_body_lambda1_told"]) <= 1e-3
     assert max(laws["excess_over_minimum_told"]) <= 1e-5
+
+
+def test_told_the_boundary_share_too_the_laws_hold_as_close(laws):
+    """The same laws, the operator told the overlap and the boundary share of each case: one
+    spectrum twice stays exact, a region again, a nested part and the whole body come out within
+    the measured tolerances, and no union is above either part for random shares of both."""
+    assert max(laws["idempotence_boundary"]) <= IDEMPOTENCE[1]
+    assert np.mean(laws["same_region_boundary"]) <= SAME_REGION_BOUNDARY
+    assert np.mean(laws["absorption_boundary"]) <= ABSORPTION_BOUNDARY
+    assert np.mean(laws["whole_body_boundary"]) <= WHOLE_BODY_BOUNDARY
+    assert max(laws["whole_body_lambda1_boundary"]) <= 1e-3
+    assert max(laws["excess_over_minimum_boundary"]) <= 1e-5

@@ -31,6 +31,34 @@ def faces_inside(mask: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return mask[faces[:, 0]] & mask[faces[:, 1]] & mask[faces[:, 2]]
 
 
+class RegionBoundaries:
+    """Boundary lengths of regions of one template: the edges with a face of the region on one
+    side only (a face is in a region when its three vertices are, :func:`faces_inside`), on the
+    rest-pose template. What the union operator's boundary share is made of."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
+        ends = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+        edges, which = np.unique(ends, axis=0, return_inverse=True)
+        rows = np.tile(np.arange(len(faces)), 3)
+        ones = np.ones(len(rows), np.float32)
+        self.faces = faces
+        self.incidence = sp.csr_matrix((ones, (rows, which.ravel())), shape=(len(faces), len(edges)))
+        self.edge_length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
+
+    def lengths(self, masks: np.ndarray) -> np.ndarray:
+        """(m,) boundary length (m) of each of the (m, n) boolean vertex masks."""
+        faces = self.faces
+        inside = (masks[:, faces[:, 0]] & masks[:, faces[:, 1]] & masks[:, faces[:, 2]]).astype(np.float32)
+        sides = (self.incidence.T @ inside.T).T  # faces of the region on each edge
+        return (sides == 1) @ self.edge_length
+
+    def shares(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(m,) the boundary share of unions of (m, n) masks: L(∂(A ∪ B)) / (L(∂A) + L(∂B)), 0
+        where neither has a boundary."""
+        total = self.lengths(a) + self.lengths(b)
+        return np.where(total > 0, self.lengths(a | b) / np.maximum(total, 1e-12), 0.0)
+
+
 @dataclass(frozen=True)
 class Region:
     """An admissible mask and how it was drawn (``kind`` names the generator)."""

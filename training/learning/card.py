@@ -125,35 +125,53 @@ def strata_table(metrics: dict) -> list[str]:
     return lines
 
 
+# The answers of the told table: name in metrics, column title (boundary columns where the operator reads it).
+TOLD_ANSWERS = (
+    ("not_told", "not told"),
+    ("told", "told"),
+    ("told_noisy", "told ± 0.1"),
+    ("told_boundary", "told + boundary share"),
+    ("told_boundary_noisy", "told ± 0.1 + boundary ± 0.06"),
+)
+
+
 def told_table(metrics: dict) -> list[str]:
     """Test C strata and Test B groups with the operator told each pair's overlap (exactly, and as
-    measured: ± 0.1), beside it not told and the best baseline on the same rows."""
+    measured: ± 0.1), and its boundary share too where it reads one, beside it not told and the
+    best baseline on the same rows; then Test C's chains told each step likewise."""
     told = metrics.get("overlap_told", {})
     if not told:
         return []
+    answers = [(name, title) for name, title in TOLD_ANSWERS if name in next(iter(told.values()))["union"]]
     lines = [
-        "| split / stratum or group / variant | n | not told mre | told mre | told ± 0.1 mre | best baseline mre | "
-        "90 % coverage: not told / told / told ± 0.1 |",
-        "|---" * 7 + "|",
+        "| split / stratum or group / variant | n | "
+        + " | ".join(f"{title} mre" for _, title in answers)
+        + " | best baseline mre | 90 % coverage: "
+        + " / ".join(title for _, title in answers)
+        + " |",
+        "|---" * (len(answers) + 4) + "|",
     ]
     for key, row in told.items():
         union, coverage = row["union"], row["interval_coverage"]
         same_rows = metrics.get("strata", {}).get(key) or metrics["rows"].get(key)
         best = min(same_rows["union"][b]["mre"] for b in BASELINES) if same_rows else float("nan")
         lines.append(
-            f"| {key} | {row['rows']} | {percent(union['not_told']['mre'])} | {percent(union['told']['mre'])} | "
-            f"{percent(union['told_noisy']['mre'])} | {percent(best)} | "
-            + " / ".join(percent(coverage[name]) for name in ("not_told", "told", "told_noisy"))
+            f"| {key} | {row['rows']} | "
+            + " | ".join(percent(union[name]["mre"]) for name, _ in answers)
+            + f" | {percent(best)} | "
+            + " / ".join(percent(coverage[name]) for name, _ in answers)
             + " |"
         )
+    chained = {"not_told": "operator", "told": "operator_told", "told_boundary": "operator_told_boundary"}
     for length, row in metrics.get("test_c_chains", {}).items():
         if "operator_told" in row.get("union", {}):
             union = row["union"]
             best = min(union[b]["mre"] for b in BASELINES if b in union)
+            cells = [percent(union[chained[name]]["mre"]) if chained.get(name) in union else "—" for name, _ in answers]
             lines.append(
                 f"| test_c / chain of {length} views, each step told | {row['rows']} | "
-                f"{percent(union['operator']['mre'])} | {percent(union['operator_told']['mre'])} | — | "
-                f"{percent(best)} | — |"
+                + " | ".join(cells)
+                + f" | {percent(best)} | — |"
             )
     return lines
 
@@ -200,8 +218,10 @@ def goals_table(metrics: dict) -> list[str]:
     for key, row in others:
         best = min(row["union"][b]["mre"] for b in BASELINES)
         answers = [("", row["union"]["operator"]["mre"])]
-        if key in told:  # the same rows, the operator told each pair's overlap
+        if key in told:  # the same rows, the operator told each pair's overlap (and boundary share)
             answers.append((", told the overlap", told[key]["union"]["told"]["mre"]))
+            if "told_boundary" in told[key]["union"]:
+                answers.append((", told the overlap and boundary share", told[key]["union"]["told_boundary"]["mre"]))
         for told_note, ours in answers:
             add(
                 f"{key}{told_note}: mre ≤ 10 % and ≥ 1.5× better than the best baseline",
@@ -321,7 +341,8 @@ def _told_section(metrics: dict) -> list[str]:
     return [
         "### Told the overlap (`overlap`: the share of the smaller part inside the other, where a client knows it)",
         "The same Test C and Test B rows, the operator told each pair's true share (template areas), then that",
-        "share plus Gaussian noise of 0.1 (clipped to 0 … 1), as a client's measurement might be.",
+        "share plus Gaussian noise of 0.1 (clipped to 0 … 1), as a client's measurement might be; for an",
+        "operator that reads it, told the boundary share too (template edges), exactly and plus noise of 0.06.",
         "",
         *table,
         "",

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from app.geometry.laplacian import mesh_operators
+from training.data.regions import RegionBoundaries
 from training.data.spectra import MESH
 from training.data.template import Template
 
@@ -162,6 +163,47 @@ class SpectralData:
         so_far = np.column_stack([chains.view_masks[:, :1], chains.union_masks[:, :-1]])
         steps = [self.overlap_shares(so_far[:, i], chains.view_masks[:, i + 1]) for i in range(so_far.shape[1])]
         return np.stack(steps, axis=1) if steps else np.zeros((len(chains.shape), 0))
+
+    def boundary_shares(self, mask_a: np.ndarray, mask_b: np.ndarray, mask_union: np.ndarray) -> np.ndarray:
+        """(len(mask_a),) how much of the two parts' boundary length is left on their union's
+        boundary, L(∂(A ∪ B)) / (L(∂A) + L(∂B)), for triples of mask indices: 0 where the union is
+        closed, 1 where neither part covers any of the other's boundary. With the overlap share it
+        tells the union's area and boundary length, Weyl's two terms of a Dirichlet spectrum
+        (measured from registered views too: app.geometry.overlap.measured_fold)."""
+        lengths = self.boundary_lengths(np.concatenate([mask_a, mask_b, mask_union]))
+        a, b, union = np.split(lengths, 3)
+        total = a + b
+        return np.where(total > 0, union / np.maximum(total, 1e-12), 0.0)
+
+    def chain_boundaries(self) -> np.ndarray:
+        """(chains, views − 1) each step's true boundary share along the Test C chains, as the left
+        fold is told it (:meth:`chain_shares`)."""
+        chains = self.chains
+        so_far = np.column_stack([chains.view_masks[:, :1], chains.union_masks[:, :-1]])
+        steps = [
+            self.boundary_shares(so_far[:, i], chains.view_masks[:, i + 1], chains.union_masks[:, i])
+            for i in range(so_far.shape[1])
+        ]
+        return np.stack(steps, axis=1) if steps else np.zeros((len(chains.shape), 0))
+
+    def boundary_lengths(self, indices: np.ndarray, chunk: int = 256) -> np.ndarray:
+        """(len(indices),) the boundary length (m) of each of the masks ``indices`` on the rest-pose
+        template (:class:`RegionBoundaries`). Each distinct mask is measured once per data set."""
+        indices = np.asarray(indices)
+        todo = np.setdiff1d(np.unique(indices), np.fromiter(self._boundary_cache, dtype=indices.dtype))
+        for start in range(0, len(todo), chunk):
+            window = todo[start : start + chunk]
+            lengths = self._boundaries.lengths(self.masks(window))
+            self._boundary_cache.update(zip(window.tolist(), lengths.tolist(), strict=True))
+        return np.array([self._boundary_cache[int(i)] for i in indices], dtype=np.float64)
+
+    @cached_property
+    def _boundary_cache(self) -> dict[int, float]:
+        return {}
+
+    @cached_property
+    def _boundaries(self) -> RegionBoundaries:
+        return RegionBoundaries(self.template.vertices, self.template.faces)
 
     def masks(self, indices: np.ndarray) -> np.ndarray:
         """(len(indices), n) boolean template masks."""

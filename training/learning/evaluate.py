@@ -19,10 +19,11 @@ from app.contract import (
     LOCALIZER_INPUTS,
     MASK_THRESHOLD,
     UNION_FILE,
+    UNKNOWN_BOUNDARY,
     UNKNOWN_OVERLAP,
     union_feeds,
 )
-from app.inference.models import chained_sigma, reads_overlap
+from app.inference.models import chained_sigma, reads_boundary, reads_overlap
 from training.data.overlaps import CAMERA
 from training.data.pairs import FULL_COVERAGE, NESTED_SHARE, PARTIAL_UNION
 from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
@@ -90,9 +91,29 @@ PAPER_IOU = {
 
 
 UnionPredictor = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # (a, b) → (union, σ)
-ToldPredictor = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # (a, b, overlap) → …
+
+
+@dataclass(frozen=True)
+class ToldPredictor:
+    """(a, b, overlap[, boundary]) → (union, σ): an operator told each pair's overlap, and its
+    boundary share where it reads one (``reads_boundary``)."""
+
+    predict: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None], tuple[np.ndarray, np.ndarray]]
+    reads_boundary: bool
+
+    def __call__(
+        self, a: np.ndarray, b: np.ndarray, overlap: np.ndarray, boundary: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        if boundary is not None and not self.reads_boundary:
+            raise ValueError("this operator does not read the boundary share")
+        return self.predict(a, b, overlap, boundary)
+
+
 # The told overlap as a caller measures it: the true share plus this much absolute noise (fixed seed).
 TOLD_NOISE = 0.1
+# The told boundary share as a caller measures it: the true one plus this much absolute noise
+# (twice the mean error of one measured from registered views, benchmarks/measured_overlap.py).
+BOUNDARY_NOISE = 0.06
 RegionPredictor = Callable[[np.ndarray], np.ndarray]  # spectra → (m, n) boolean template masks
 
 
@@ -108,7 +129,8 @@ def told_predictor(union: UnionOperator) -> ToldPredictor | None:
     """The operator told each pair's overlap, or None for one that does not read it."""
     if not union.config.overlap_hint:
         return None
-    return lambda a, b, overlap: predict(union, a, b, overlap=overlap)
+    told = lambda a, b, overlap, boundary: predict(union, a, b, overlap=overlap, boundary=boundary)  # noqa: E731
+    return ToldPredictor(told, union.reads_boundary)
 
 
 def served_predictors(models: Path, batch: int = 1024) -> tuple[UnionPredictor, dict[str, RegionPredictor]]:
@@ -136,18 +158,27 @@ def served_told_predictor(models: Path, batch: int = 1024) -> ToldPredictor | No
     graph = session(models / UNION_FILE)
     if not reads_overlap(graph):
         return None
-    return lambda a, b, overlap: _run_union(graph, a, b, overlap, batch)
+    told = lambda a, b, overlap, boundary: _run_union(graph, a, b, overlap, batch, boundary)  # noqa: E731
+    return ToldPredictor(told, reads_boundary(graph))
 
 
 def _run_union(
-    graph: ort.InferenceSession, a: np.ndarray, b: np.ndarray, overlap: np.ndarray | None, batch: int
+    graph: ort.InferenceSession,
+    a: np.ndarray,
+    b: np.ndarray,
+    overlap: np.ndarray | None,
+    batch: int,
+    boundary: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(union, σ) of an onnxruntime union graph, in batches."""
+    """(union, σ) of an onnxruntime union graph, in batches; a graph that reads the boundary share
+    is told it unknown where ``boundary`` is None."""
+    if boundary is None and reads_boundary(graph):
+        boundary = np.full(len(a), UNKNOWN_BOUNDARY)
     outputs = []
     for start in range(0, len(a), batch):
         window = slice(start, start + batch)
-        told = None if overlap is None else overlap[window]
-        outputs.append(graph.run(None, union_feeds(a[window], b[window], told)))
+        told, edge = (None if x is None else x[window] for x in (overlap, boundary))
+        outputs.append(graph.run(None, union_feeds(a[window], b[window], told, edge)))
     return np.concatenate([o[0] for o in outputs]), np.concatenate([o[1] for o in outputs])
 
 
@@ -230,6 +261,12 @@ class Evaluator:
             "told": self.told(rows.a, rows.b, shares),
             "told_noisy": self.told(rows.a, rows.b, np.clip(shares + noise, 0.0, 1.0)),
         }
+        if self.told.reads_boundary:  # told the boundary share too, exactly and as measured (± BOUNDARY_NOISE)
+            boundaries = self.data.boundary_shares(rows.mask_a, rows.mask_b, rows.mask_union)
+            edge_noise = np.random.default_rng(1).normal(0.0, BOUNDARY_NOISE, len(shares))
+            answers["told_boundary"] = self.told(rows.a, rows.b, shares, boundaries)
+            noisy = np.clip(shares + noise, 0.0, 1.0), np.clip(boundaries + edge_noise, 0.0, 1.0)
+            answers["told_boundary_noisy"] = self.told(rows.a, rows.b, *noisy)
         out = {}
         for label in np.unique(labels):
             for variant in (MESH, REMESHED):
@@ -266,8 +303,12 @@ class Evaluator:
             return out
         views = chains.views
         current = {"operator": views[:, 0], "lookup": views[:, 0], "disjoint_union": views[:, 0]}
+        boundaries = None
         if self.told is not None:
             current["operator_told"] = views[:, 0]
+            if self.told.reads_boundary:
+                current["operator_told_boundary"] = views[:, 0]
+                boundaries = self.data.chain_boundaries()
         sigma = np.zeros_like(views[:, 0])
         shares = self.data.chain_shares() if self.told is not None else None
         for length in range(2, views.shape[1] + 1):
@@ -277,6 +318,9 @@ class Evaluator:
             current["operator"] = union
             if shares is not None:  # told the share of the smaller of (views so far, next view) inside the other
                 current["operator_told"] = self.told(current["operator_told"], step, shares[:, length - 2])[0]
+            if boundaries is not None:  # … and the boundary share of the step
+                told = shares[:, length - 2], boundaries[:, length - 2]
+                current["operator_told_boundary"] = self.told(current["operator_told_boundary"], step, *told)[0]
             current["lookup"] = self.lookup.predict(current["lookup"], step)
             current["disjoint_union"] = disjoint_union(current["disjoint_union"], step)
             if length < 3:

@@ -20,9 +20,11 @@ from app.contract import (
     LOCALIZER_OUTPUTS,
     RECONSTRUCTION_INPUTS,
     RECONSTRUCTION_OUTPUTS,
+    UNION_BOUNDARY_INPUT,
     UNION_INPUTS,
     UNION_OUTPUTS,
     UNION_OVERLAP_INPUT,
+    UNKNOWN_BOUNDARY,
     UNKNOWN_OVERLAP,
     union_feeds,
 )
@@ -59,21 +61,28 @@ def _export(model: torch.nn.Module, example: tuple[torch.Tensor, ...], path: Pat
 
 
 class _WithOverlap(torch.nn.Module):
-    """The operator as served when it reads the overlap: (a, b, overlap) → (union, σ)."""
+    """The operator as served when it reads the overlap: (a, b, overlap[, boundary]) → (union, σ)."""
 
     def __init__(self, model: UnionOperator) -> None:
         super().__init__()
         self.model = model
 
-    def forward(self, a: torch.Tensor, b: torch.Tensor, overlap: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        return self.model(a, b, None, overlap)
+    def forward(
+        self, a: torch.Tensor, b: torch.Tensor, overlap: torch.Tensor, boundary: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.model(a, b, None, overlap, boundary)
 
 
 def export_union(model: UnionOperator, path: Path) -> None:
-    """The graph reads ``UNION_OVERLAP_INPUT`` too when the operator was trained to."""
+    """The graph reads ``UNION_OVERLAP_INPUT`` too when the operator was trained to, and
+    ``UNION_BOUNDARY_INPUT`` when its told specialist reads the boundary share."""
     k = model.config.k
     example = torch.linspace(1, 60, k).repeat(2, 1)
-    if model.config.overlap_hint:
+    if model.reads_boundary:
+        told = torch.tensor([[0.5], [UNKNOWN_OVERLAP]]), torch.tensor([[0.6], [UNKNOWN_BOUNDARY]])
+        inputs = (*UNION_INPUTS, UNION_OVERLAP_INPUT, UNION_BOUNDARY_INPUT)
+        _export(_WithOverlap(model), (example, example * 1.5, *told), path, inputs, UNION_OUTPUTS)
+    elif model.config.overlap_hint:
         overlap = torch.tensor([[0.5], [UNKNOWN_OVERLAP]])
         inputs = (*UNION_INPUTS, UNION_OVERLAP_INPUT)
         _export(_WithOverlap(model), (example, example * 1.5, overlap), path, inputs, UNION_OUTPUTS)
@@ -104,14 +113,24 @@ def session(path: Path) -> ort.InferenceSession:
 
 
 def union_parity(
-    model: UnionOperator, path: Path, a: np.ndarray, b: np.ndarray, overlap: np.ndarray | None = None
+    model: UnionOperator,
+    path: Path,
+    a: np.ndarray,
+    b: np.ndarray,
+    overlap: np.ndarray | None = None,
+    boundary: np.ndarray | None = None,
 ) -> float:
     """Largest relative difference between onnxruntime and PyTorch on these operands (and
-    overlaps, for an operator that reads them)."""
-    told = None if overlap is None else torch.as_tensor(overlap, dtype=torch.float32).reshape(-1, 1)
+    overlaps and boundary shares, for an operator that reads them; unknown boundary shares where
+    not given)."""
+    if boundary is None and model.reads_boundary:
+        boundary = np.full(len(a), UNKNOWN_BOUNDARY)
+    told, edge = (
+        None if x is None else torch.as_tensor(x, dtype=torch.float32).reshape(-1, 1) for x in (overlap, boundary)
+    )
     with torch.no_grad():
-        expected = model.eval()(torch.as_tensor(a), torch.as_tensor(b), None, told)
-    got = session(path).run(None, union_feeds(a, b, overlap))
+        expected = model.eval()(torch.as_tensor(a), torch.as_tensor(b), None, told, edge)
+    got = session(path).run(None, union_feeds(a, b, overlap, boundary))
     return max(_relative(g, e.numpy()) for g, e in zip(got, expected, strict=True))
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.contract import LOCALIZER_FILE, PROFILE_SHARES, UNION_FILE
+from app.contract import LOCALIZER_FILE, PROFILE_SHARES, UNION_FILE, UNKNOWN_BOUNDARY
 from app.inference.manifest import write_manifest
 from app.retrieval.seed import SEED_FILE
 from training.learning.baselines import elementwise_min, larger_part
@@ -46,7 +46,7 @@ TRAINING_PRESETS = {
     "tiny": TrainingPreset(
         UnionTraining(epochs=2, batch=8, chain_batch=2, told_epochs=2, told_batch=16),
         LocalizerTraining(epochs=2, batch=16),
-        UnionConfig(disjoint_prior=True, overlap_hint=True, told_width=16),  # as the standard preset's
+        UnionConfig(disjoint_prior=True, overlap_hint=True, told_width=16, told_boundary=True),  # as the standard's
     ),
     # Sized for a 2-core CPU: the transformer correction takes ~2.5 min per epoch on one core (it
     # is launch-bound: small matrices, many operations), the localizers ~25 min in all. The
@@ -56,8 +56,16 @@ TRAINING_PRESETS = {
     # much of the smaller part lies inside the other (UnionConfig.overlap_hint; told for half the
     # training rows, with noise).
     # Pairs told their overlap are answered by a network of their own (UnionConfig.told_width,
-    # train_union.train_told), trained after the correction in ~1 min.
+    # train_union.train_told), trained after the correction in ~1 min; it also reads the
+    # boundary share where a caller knows it (UnionConfig.told_boundary).
     "standard": TrainingPreset(
+        UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0),
+        LocalizerTraining(epochs=8, batch=128, first_restart=8),
+        UnionConfig(disjoint_prior=True, overlap_hint=True, told_width=256, told_boundary=True),
+    ),
+    # The operator served before the boundary share (model 72d5281c3617): its specialist reads
+    # the overlap alone.
+    "standard-share-only": TrainingPreset(
         UnionTraining(epochs=12, batch=64, learning_rate=1e-3, first_restart=12, dropout=0.0),
         LocalizerTraining(epochs=8, batch=128, first_restart=8),
         UnionConfig(disjoint_prior=True, overlap_hint=True, told_width=256),
@@ -185,8 +193,12 @@ def run_pipeline(
     write_manifest(models)
     real = data.pairs.rows(np.flatnonzero(data.pairs.split != "train"))
     told = data.overlap_shares(real.mask_a, real.mask_b) if union.config.overlap_hint else None
+    boundary = None
+    if union.reads_boundary:  # every other row told its boundary share: both of the specialist's paths
+        boundary = data.boundary_shares(real.mask_a, real.mask_b, real.mask_union)
+        boundary[1::2] = UNKNOWN_BOUNDARY
     parity = {
-        "union": union_parity(union, models / UNION_FILE, real.a, real.b, told),
+        "union": union_parity(union, models / UNION_FILE, real.a, real.b, told, boundary),
         "localizer": localizer_parity(localizers[SERVED_LOCALIZER], models / LOCALIZER_FILE, real.union),
     }
     metrics = evaluate(data, *trained_predictors(union, localizers), told_predictor(union))
@@ -208,8 +220,8 @@ def run_pipeline(
 
 def retrieval_queries(data: SpectralData, union) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Full-coverage test pairs (every variant): their predicted union (and, for an operator that
-    reads it, their union told their overlap, and their share profile: (n, shares, k)) and two
-    part-only baselines."""
+    reads it, their union told their overlap, told it and their boundary share, and their share
+    profile: (n, shares, k)) and two part-only baselines."""
     pairs = data.pairs
     rows = pairs.rows(
         np.flatnonzero((pairs.split != "train") & (pairs.split != "validation") & (pairs.scenario == "full"))
@@ -223,6 +235,10 @@ def retrieval_queries(data: SpectralData, union) -> dict[str, tuple[np.ndarray, 
     if union.config.overlap_hint:  # the same pairs, each told how much its parts overlap
         told = data.overlap_shares(rows.mask_a, rows.mask_b)
         queries["operator_union_told"] = (predict(union, rows.a, rows.b, overlap=told)[0], rows.shape_a)
+        if union.reads_boundary:  # … and their boundary share (0: two parts covering the body close it)
+            boundary = data.boundary_shares(rows.mask_a, rows.mask_b, rows.mask_union)
+            told_both = predict(union, rows.a, rows.b, overlap=told, boundary=boundary)[0]
+            queries["operator_union_told_boundary"] = (told_both, rows.shape_a)
         # Untold, by share profile: each stored shape under the share that brings the union nearest.
         profile = [predict(union, rows.a, rows.b, overlap=np.full(len(rows.a), c))[0] for c in PROFILE_SHARES]
         queries["operator_union_share_profile"] = (np.stack(profile, axis=1), rows.shape_a)

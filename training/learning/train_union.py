@@ -73,6 +73,10 @@ class UnionTraining(LoopSettings):
     told_epochs: int = 40
     told_batch: int = 256
     told_learning_rate: float = 2e-3
+    # The boundary specialist (UnionConfig.told_boundary) is told each row's boundary share with
+    # this much absolute noise: measured from registered views it is off by 0.03 on average, 0.06
+    # at the 95th percentile (the Test C sessions, benchmarks/measured_overlap.py).
+    boundary_noise: float = 0.04
 
 
 def _tensor(array: np.ndarray, device: torch.device) -> torch.Tensor:
@@ -199,9 +203,10 @@ def _batches(
     bodies: tuple[np.ndarray, np.ndarray] | None,
     batch: int,
     overlap: np.ndarray | None = None,
-) -> Iterator[tuple[torch.Tensor, torch.Tensor, torch.Tensor | None, torch.Tensor | None]]:
-    """(a, b, the memory rows hidden from each query, the overlaps told) of each batch, as tensors
-    on the model's device."""
+    boundary: np.ndarray | None = None,
+) -> Iterator[tuple[torch.Tensor, torch.Tensor, torch.Tensor | None, torch.Tensor | None, torch.Tensor | None]]:
+    """(a, b, the memory rows hidden from each query, the overlaps told, the boundary shares told)
+    of each batch, as tensors on the model's device."""
     device = next(model.parameters()).device
     memory_bodies = None if bodies is None else torch.as_tensor(bodies[0], device=device)
     for start in range(0, len(a), batch):
@@ -209,8 +214,8 @@ def _batches(
         hidden = None
         if memory_bodies is not None:
             hidden = same_body(memory_bodies, torch.as_tensor(bodies[1][window], device=device))
-        told = None if overlap is None else _tensor(overlap[window], device).reshape(-1, 1)
-        yield _tensor(a[window], device), _tensor(b[window], device), hidden, told
+        told, edge = (None if x is None else _tensor(x[window], device).reshape(-1, 1) for x in (overlap, boundary))
+        yield _tensor(a[window], device), _tensor(b[window], device), hidden, told, edge
 
 
 @torch.no_grad()
@@ -221,18 +226,20 @@ def predict(
     bodies: tuple[np.ndarray, np.ndarray] | None = None,
     batch: int = 1024,
     overlap: np.ndarray | None = None,
+    boundary: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(union, σ) for numpy operands, in eval mode, on the model's device.
 
     ``bodies`` (the memory rows' bodies, the queries' bodies) hides from each query the memory
     rows cut from its body: predictions of training or validation pairs are then those of a new
     body, like the test pairs'. ``overlap`` (n,): what each pair is told of its overlap
-    (UnionConfig.overlap_hint; negative: unknown; None: unknown for all).
+    (UnionConfig.overlap_hint; negative: unknown; None: unknown for all); ``boundary`` (n,) the
+    boundary shares told besides it (UnionConfig.told_boundary; negative or None: unknown).
     """
     model.eval()
     means, sigmas = [], []
-    for a_t, b_t, hidden, told in _batches(model, a, b, bodies, batch, overlap):
-        mean, sigma = model(a_t, b_t, hidden, told)
+    for a_t, b_t, hidden, told, edge in _batches(model, a, b, bodies, batch, overlap, boundary):
+        mean, sigma = model(a_t, b_t, hidden, told, edge)
         means.append(mean.cpu().numpy())
         sigmas.append(sigma.cpu().numpy())
     return np.concatenate(means), np.concatenate(sigmas)
@@ -270,7 +277,7 @@ class BlendRows:
         batch: int = 1024,
     ) -> "BlendRows":
         columns: list[list[np.ndarray]] = [[] for _ in range(5)]
-        for a_t, b_t, hidden, _ in _batches(model, a, b, bodies, batch):
+        for a_t, b_t, hidden, _, _ in _batches(model, a, b, bodies, batch):
             parts = model.proposal(a_t, b_t, hidden)
             median, features = model.blend_terms(parts)
             values = (parts.floor, parts.decrease, median, features, parts.scale)
@@ -517,6 +524,9 @@ def train_union(
     if config.overlap_hint and config.told_width > 0:
         shares = data.overlap_shares(train.mask_a, train.mask_b)
         model.attach_told(train_told(model, train, shares, settings))
+        if config.told_boundary:
+            boundaries = data.boundary_shares(train.mask_a, train.mask_b, train.mask_union)
+            model.attach_told(train_told(model, train, shares, settings, boundaries))
     if config.overlap_hint:
         told = data.overlap_shares(validation.mask_a, validation.mask_b)
         calibrate_told(model, validation.a, validation.b, validation.union, told, bodies)
@@ -524,11 +534,19 @@ def train_union(
     return model
 
 
-def train_told(model: UnionOperator, train: PairTable, shares: np.ndarray, settings: UnionTraining) -> ToldCorrection:
+def train_told(
+    model: UnionOperator,
+    train: PairTable,
+    shares: np.ndarray,
+    settings: UnionTraining,
+    boundaries: np.ndarray | None = None,
+) -> ToldCorrection:
     """The told specialist (:class:`ToldCorrection`) trained on the training pairs, each told its
     true ``shares`` plus ``settings.overlap_noise`` of noise, to the same loss as the correction,
-    with everything else of ``model`` (its coincidence gate) as trained. Seeded from
-    ``settings.seed`` and deterministic on the CPU; ~1 min on 2 cores for the standard set.
+    with everything else of ``model`` (its coincidence gate) as trained; with ``boundaries``, a
+    specialist that reads the boundary share too, told it plus ``settings.boundary_noise``.
+    Seeded from ``settings.seed`` and deterministic on the CPU; ~1 min on 2 cores for the
+    standard set.
 
     It reads no memory, so every input is computed once: only the network's own weights move.
     """
@@ -542,8 +560,9 @@ def train_told(model: UnionOperator, train: PairTable, shares: np.ndarray, setti
         gate = model.cpu().coincidence(za, zb)
         floor, target = torch.minimum(za, zb), relative_log(union, scale)
     share = _tensor(shares, torch.device("cpu"))[:, None]
-    specialist = ToldCorrection(za.shape[1], model.config.told_width)
-    specialist.set_standardization(ToldCorrection.inputs(za, zb, disjoint, share))
+    edge = None if boundaries is None else _tensor(boundaries, torch.device("cpu"))[:, None]
+    specialist = ToldCorrection(za.shape[1], model.config.told_width, boundary=edge is not None)
+    specialist.set_standardization(ToldCorrection.inputs(za, zb, disjoint, specialist.told(share, edge)))
     optimizer = torch.optim.Adam(specialist.parameters(), lr=settings.told_learning_rate)
     steps_per_epoch = -(-len(a) // settings.told_batch)
     schedule = torch.optim.lr_scheduler.OneCycleLR(
@@ -555,7 +574,9 @@ def train_told(model: UnionOperator, train: PairTable, shares: np.ndarray, setti
         for start in range(0, len(a), settings.told_batch):
             rows = order[start : start + settings.told_batch]
             noise = torch.randn(len(rows), 1, generator=generator) * settings.overlap_noise
-            told = torch.clamp(share[rows] + noise, 0.0, 1.0)
+            told = specialist.told(
+                torch.clamp(share[rows] + noise, 0.0, 1.0), _boundary_told(edge, rows, settings, generator)
+            )
             z = floor[rows] - gate[rows] * specialist(za[rows], zb[rows], disjoint[rows], told)
             loss = CASE_LOSSES[settings.loss](z - target[rows]).mean()
             optimizer.zero_grad()
@@ -563,6 +584,18 @@ def train_told(model: UnionOperator, train: PairTable, shares: np.ndarray, setti
             optimizer.step()
             schedule.step()
     return specialist.eval()
+
+
+def _boundary_told(
+    boundaries: torch.Tensor | None, rows: torch.Tensor, settings: UnionTraining, generator: torch.Generator
+) -> torch.Tensor | None:
+    """(B, 1) what a batch of the boundary specialist's rows is told of their boundary shares: the
+    true one plus noise, clipped to 0 … 1. None for a specialist that does not read it (drawing
+    nothing: the share-only specialist trains as it did before there was another)."""
+    if boundaries is None:
+        return None
+    noise = torch.randn(len(rows), 1, generator=generator) * settings.boundary_noise
+    return torch.clamp(boundaries[rows] + noise, 0.0, 1.0)
 
 
 def _told(shares: torch.Tensor, settings: UnionTraining, generator: torch.Generator) -> torch.Tensor:

@@ -84,6 +84,13 @@ class UnionConfig:
     # overlap; 0: none, the correction answers them too. Trained after the correction
     # (train_union.train_told), so a finished run gains one without training again.
     told_width: int = 0
+    # A second told specialist answers the pairs told, besides the share, how much of the two
+    # parts' boundary length is left on the union's boundary (``boundary``, 0 … 1; unknown when
+    # negative, UNKNOWN_BOUNDARY). With the share it tells the union's area and boundary length,
+    # the two terms of Weyl's law for a Dirichlet spectrum: a view that closes a session's holes
+    # adds little area and much of the spectrum's fall, which the share alone cannot tell. A
+    # network of its own, so that pairs told the share alone keep the first one's answers.
+    told_boundary: bool = False
 
     def __post_init__(self) -> None:
         assert self.k >= 2 and self.neighbours >= 1, (self.k, self.neighbours)
@@ -257,9 +264,10 @@ class ToldCorrection(nn.Module):
     halves' non-negative outputs are added: commutative bit for bit, as IEEE addition is.
     """
 
-    def __init__(self, k: int, width: int) -> None:
+    def __init__(self, k: int, width: int, boundary: bool = False) -> None:
         super().__init__()
-        inputs = 3 * k + 1
+        self.told_columns = 2 if boundary else 1  # the share, and the boundary share for one that reads it
+        inputs = 3 * k + self.told_columns
         # The inputs' standardization, set from the training rows (set_standardization).
         self.register_buffer("centre", torch.zeros(inputs))
         self.register_buffer("spread", torch.ones(inputs))
@@ -268,21 +276,30 @@ class ToldCorrection(nn.Module):
             nn.Linear(width, width), nn.GELU(), nn.Linear(width, k),
         )  # fmt: skip
 
+    def told(self, overlap: Tensor, boundary: Tensor | None = None) -> Tensor:
+        """(B, told_columns) what the pair is told: the share and, for a specialist that reads it,
+        the boundary share, each clamped to 0 … 1."""
+        share = torch.clamp(overlap, min=0.0, max=1.0)
+        if self.told_columns == 1:
+            return share
+        assert boundary is not None, "a boundary specialist answers pairs told their boundary share"
+        return torch.cat([share, torch.clamp(boundary, min=0.0, max=1.0)], 1)
+
     @staticmethod
-    def inputs(za: Tensor, zb: Tensor, disjoint: Tensor, share: Tensor) -> Tensor:
-        """(2B, 3k + 1): the pair in both operand orders, one order per half."""
-        return torch.cat([torch.cat([za, zb, disjoint, share], 1), torch.cat([zb, za, disjoint, share], 1)], 0)
+    def inputs(za: Tensor, zb: Tensor, disjoint: Tensor, told: Tensor) -> Tensor:
+        """(2B, 3k + told columns): the pair in both operand orders, one order per half."""
+        return torch.cat([torch.cat([za, zb, disjoint, told], 1), torch.cat([zb, za, disjoint, told], 1)], 0)
 
     @torch.no_grad()
     def set_standardization(self, inputs: Tensor) -> None:
-        """Centre and spread of each input column over ``inputs`` (the share left as it is)."""
+        """Centre and spread of each input column over ``inputs`` (what is told left as it is)."""
         self.centre.copy_(inputs.mean(0))
         self.spread.copy_(inputs.std(0).clamp(min=1e-6))
-        self.centre[-1], self.spread[-1] = 0.0, 1.0
+        self.centre[-self.told_columns :], self.spread[-self.told_columns :] = 0.0, 1.0
 
-    def forward(self, za: Tensor, zb: Tensor, disjoint: Tensor, share: Tensor) -> Tensor:
-        """(B, k) ≥ 0: the decrease, before the coincidence gate."""
-        both = nn.functional.softplus(self.net((self.inputs(za, zb, disjoint, share) - self.centre) / self.spread))
+    def forward(self, za: Tensor, zb: Tensor, disjoint: Tensor, told: Tensor) -> Tensor:
+        """(B, k) ≥ 0: the decrease, before the coincidence gate; ``told`` from :meth:`told`."""
+        both = nn.functional.softplus(self.net((self.inputs(za, zb, disjoint, told) - self.centre) / self.spread))
         half = za.shape[0]
         return (both[:half] + both[half:]) / 2
 
@@ -428,12 +445,21 @@ class UnionOperator(nn.Module):
         self.register_load_state_dict_pre_hook(_sigma_weights_of_older_states)
         # Answers the pairs told their overlap, once trained (attach_told); None: the correction does.
         self.register_module("told_correction", None)
+        # Answers the pairs told their boundary share too, once trained (attach_told); None: told_correction does.
+        self.register_module("boundary_correction", None)
 
     def forward(
-        self, a: Tensor, b: Tensor, exclude: Tensor | None = None, overlap: Tensor | None = None
+        self,
+        a: Tensor,
+        b: Tensor,
+        exclude: Tensor | None = None,
+        overlap: Tensor | None = None,
+        boundary: Tensor | None = None,
     ) -> tuple[Tensor, Tensor]:
         """``overlap`` (B, 1): the share of the smaller part inside the other where a caller knows
-        it, negative where not (None: unknown for all); read only with ``config.overlap_hint``."""
+        it, negative where not (None: unknown for all); read only with ``config.overlap_hint``.
+        ``boundary`` (B, 1): the boundary share where a caller knows it besides the overlap,
+        negative where not; read only by a told specialist with ``config.told_boundary``."""
         parts = self.proposal(a, b, exclude, overlap)
         if self.config.parametrization == MONOTONE:
             median, features = self.blend_terms(parts)
@@ -443,7 +469,11 @@ class UnionOperator(nn.Module):
             else:
                 decrease = self.blended(parts.decrease, median, features, parts.told)
             if self.told_correction is not None and overlap is not None:
-                decrease = torch.where(parts.told > 0, self.told_decrease(a, b, parts, overlap), decrease)
+                told = self.told_decrease(a, b, parts, overlap, self.told_correction)
+                if self.boundary_correction is not None and boundary is not None:
+                    with_boundary = self.told_decrease(a, b, parts, overlap, self.boundary_correction, boundary)
+                    told = torch.where(boundary >= 0, with_boundary, told)
+                decrease = torch.where(parts.told > 0, told, decrease)
             z = parts.floor - decrease
         else:
             z, decrease = parts.proposed, torch.zeros_like(parts.proposed)
@@ -478,17 +508,33 @@ class UnionOperator(nn.Module):
         decrease = self.decreased(floor, proposed, gate) if self.config.parametrization == MONOTONE else None
         return Proposal(scale, za, zb, floor, added, transferred, distances, gate, proposed, decrease, told)
 
-    def told_decrease(self, a: Tensor, b: Tensor, parts: "Proposal", overlap: Tensor) -> Tensor:
-        """(B, k) the told specialist's decrease (:class:`ToldCorrection`), gated like the
-        correction's, so that one spectrum twice is its own union whatever share is told."""
+    @staticmethod
+    def told_decrease(
+        a: Tensor,
+        b: Tensor,
+        parts: "Proposal",
+        overlap: Tensor,
+        specialist: ToldCorrection,
+        boundary: Tensor | None = None,
+    ) -> Tensor:
+        """(B, k) a told specialist's decrease (:class:`ToldCorrection`), gated like the
+        correction's, so that one spectrum twice is its own union whatever it is told."""
         disjoint = relative_log(disjoint_union(a, b), parts.scale)
-        share = torch.clamp(overlap, min=0.0, max=1.0)
-        return parts.gate * self.told_correction(parts.za, parts.zb, disjoint, share)
+        return parts.gate * specialist(parts.za, parts.zb, disjoint, specialist.told(overlap, boundary))
+
+    @property
+    def reads_boundary(self) -> bool:
+        """Whether the operator reads the boundary share (a boundary specialist is attached)."""
+        return self.boundary_correction is not None
 
     def attach_told(self, specialist: ToldCorrection) -> None:
-        """From now on ``specialist`` answers the pairs told their overlap (σ's told factor is
-        then to be calibrated again: ``train_union.calibrate_told``)."""
-        self.told_correction = specialist
+        """From now on ``specialist`` answers the pairs told their overlap, or, one that reads the
+        boundary share, the pairs told that too (σ's told factor is then to be calibrated again:
+        ``train_union.calibrate_told``)."""
+        if specialist.told_columns > 1:
+            self.boundary_correction = specialist
+        else:
+            self.told_correction = specialist
 
     @staticmethod
     def blend_terms(parts: "Proposal") -> tuple[Tensor, Tensor]:

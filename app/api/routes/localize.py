@@ -10,7 +10,7 @@ from pydantic import Field
 from app.api.deps import ModelsDep, SettingsDep
 from app.api.examples import success
 from app.api.metrics import INFERENCE
-from app.api.operands import FilesField, MeasureOverlapQuery, OverlapQuery, ScaleQuery, SpectraField, UnitsQuery
+from app.api.operands import FilesField, ScaleQuery, SpectraField, ToldDep, UnitsQuery
 from app.api.routes.unions import UNION_PROBLEMS, UnionResponse
 from app.api.unions import union_of_operands
 from app.inference.template import coloured_template
@@ -37,18 +37,17 @@ async def localize(
     request: Request,
     settings: SettingsDep,
     models: ModelsDep,
+    told: ToldDep,
     files: FilesField = None,
     spectra: SpectraField = None,
     units: UnitsQuery = "m",
     scale: ScaleQuery = None,
-    overlap: OverlapQuery = None,
-    measure_overlap: MeasureOverlapQuery = False,
     format: Annotated[
         Literal["json", "ply"], Query(description="ply: the template mesh with the region as vertex colours.")
     ] = "json",
 ) -> LocalizeResponse | Response:
     """Where on the template body the union of the operands lies, and how much of each part it covers."""
-    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, overlap, measure_overlap)
+    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told)
     started = time.perf_counter()
     region = await anyio.to_thread.run_sync(models.localize, outcome.result.eigenvalues)
     INFERENCE.labels("localizer").observe(time.perf_counter() - started)

@@ -31,6 +31,10 @@ class ModelsResponse(BaseModel):
     interval: str = Field(description="What lower and upper mean.")
     template_vertices: int = Field(description="Vertices of the template body.")
     parts: list[str] = Field(description="The body parts coverage is reported for, in order.")
+    told: list[str] = Field(
+        description="What the union operator reads besides the operands' spectra where a caller tells it (the "
+        "union routes' query parameters of these names): overlap, boundary; empty when it reads neither."
+    )
     database: DatabaseInfo = Field(description="The ShapeDNA database's backend and size.")
 
 
@@ -55,5 +59,6 @@ async def models_info(request: Request, models: ModelsDep) -> ModelsResponse:
         interval=f"eigenvalues ± {INTERVAL_Z}·sigma holds 90 % of held-out eigenvalues",
         template_vertices=len(models.template.vertices),
         parts=list(PART_NAMES),
+        told=[name for name, read in (("overlap", models.reads_overlap), ("boundary", models.reads_boundary)) if read],
         database=database,
     )

@@ -2,9 +2,10 @@
 
 A front-end that posts a scanner's views one by one (``/v1/spectrum?footprint=true``) and then
 sends only spectra has no geometry left for ``measure_overlap``. It keeps each view's footprint
-token instead and asks here for each union step's overlap, which it then tells the union-based
-routes (``overlap=``). The answer carries the union's own footprint, so the next view needs only
-two tokens (the union so far and the view): one request per view, whatever the session's length.
+token instead and asks here for each union step's overlap and boundary share, which it then
+tells the union-based routes (``overlap=``, ``boundary=``). The answer carries the union's own
+footprint, so the next view needs only two tokens (the union so far and the view): one request
+per view, whatever the session's length.
 """
 
 import time
@@ -29,6 +30,11 @@ class OverlapResponse(BaseModel):
     overlaps: list[float] = Field(
         description="Each union step's overlap (share of the smaller operand inside the other), one per token "
         "after the first: send them as the union routes' overlap, in the same order."
+    )
+    boundaries: list[float] = Field(
+        description="Each union step's boundary share (how much of the two operands' boundary length is left on "
+        "the union's boundary: 0 closed, 1 neither covers any of the other's), one per token after the first: "
+        "send them as the union routes' boundary, beside overlap."
     )
     union_footprint: str = Field(
         description="The footprint token of the union of all the views: send it first next time, with the "
@@ -55,13 +61,15 @@ async def overlap(
         ),
     ],
 ) -> OverlapResponse:
-    """The overlap of each step of the left fold ((A ∪ B) ∪ C) ∪ … of registered views."""
+    """The overlap and boundary share of each step of the left fold ((A ∪ B) ∪ C) ∪ … of registered views."""
     views = parse_footprints(footprints)
     started = time.perf_counter()
-    shares, union = await anyio.to_thread.run_sync(measured_fold, views)  # k-d trees: off the event loop
-    token = await anyio.to_thread.run_sync(footprint_token, union)
+    fold = await anyio.to_thread.run_sync(measured_fold, views)  # k-d trees: off the event loop
+    token = await anyio.to_thread.run_sync(footprint_token, fold.union)
     measure_ms = (time.perf_counter() - started) * 1e3
-    return OverlapResponse(overlaps=shares, union_footprint=token, measure_ms=round(measure_ms, 2))
+    return OverlapResponse(
+        overlaps=fold.overlaps, boundaries=fold.boundaries, union_footprint=token, measure_ms=round(measure_ms, 2)
+    )
 
 
 def parse_footprints(text: str) -> list[Footprint]:

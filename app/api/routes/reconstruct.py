@@ -27,10 +27,9 @@ from app.api.examples import success
 from app.api.operands import (
     CapHolesQuery,
     FilesField,
-    MeasureOverlapQuery,
-    OverlapQuery,
     ScaleQuery,
     SpectraField,
+    ToldDep,
     UnitsQuery,
 )
 from app.api.problems import ProblemError, problem_responses
@@ -94,12 +93,11 @@ async def reconstruct(
     request: Request,
     settings: SettingsDep,
     models: ModelsDep,
+    told: ToldDep,
     files: FilesField = None,
     spectra: SpectraField = None,
     units: UnitsQuery = "m",
     scale: ScaleQuery = None,
-    overlap: OverlapQuery = None,
-    measure_overlap: MeasureOverlapQuery = False,
     cap_holes: CapHolesQuery = False,
     format: Annotated[
         Literal["json", "ply"],
@@ -114,9 +112,7 @@ async def reconstruct(
         raise ProblemError(
             501, "reconstruction-unavailable", "Reconstruction unavailable", "these models have no shape decoder"
         )
-    outcome = await union_of_operands(
-        request, settings, models, files, spectra, units, scale, overlap, measure_overlap, cap_holes
-    )
+    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told, cap_holes)
     body = await rebuilt_body(request, models, outcome.result)
     height, area = body_height(body.vertices), surface_area(body.vertices, models.template.faces)
     warnings = [*outcome.warnings, *round_trip_warnings(body.verdict, body.gap)]

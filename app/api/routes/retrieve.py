@@ -30,10 +30,9 @@ from app.api.examples import success
 from app.api.operands import (
     CapHolesQuery,
     FilesField,
-    MeasureOverlapQuery,
-    OverlapQuery,
     ScaleQuery,
     SpectraField,
+    ToldDep,
     UnitsQuery,
 )
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
@@ -154,13 +153,12 @@ async def retrieve(
     request: Request,
     settings: SettingsDep,
     models: ModelsDep,
+    told: ToldDep,
     store: StoreDep,
     files: FilesField = None,
     spectra: SpectraField = None,
     units: UnitsQuery = "m",
     scale: ScaleQuery = None,
-    overlap: OverlapQuery = None,
-    measure_overlap: MeasureOverlapQuery = False,
     top: Annotated[int, Query(ge=1, le=MAX_TOP, description="Number of matches.")] = 10,
     rebuild: Annotated[
         bool,
@@ -180,9 +178,7 @@ async def retrieve(
 ) -> RetrieveResponse:
     """The stored complete shapes nearest to the union of the operands (an open one through its rebuilt body,
     two operands whose overlap is not told by their share profile)."""
-    outcome = await union_of_operands(
-        request, settings, models, files, spectra, units, scale, overlap, measure_overlap, cap_holes
-    )
+    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told, cap_holes)
     looked_up, ranked_by, notes = await looked_up_spectra(request, models, outcome, rebuild, profile)
     matches, first = await ranked(store, looked_up, ranked_by, top)
     return RetrieveResponse(

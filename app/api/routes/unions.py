@@ -9,7 +9,7 @@ from pydantic import BaseModel, Field
 
 from app.api.deps import ModelsDep, SettingsDep
 from app.api.examples import success
-from app.api.operands import FilesField, MeasureOverlapQuery, OverlapQuery, ScaleQuery, SpectraField, UnitsQuery
+from app.api.operands import FilesField, ScaleQuery, SpectraField, ToldDep, UnitsQuery
 from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.api.unions import union_of_operands
 
@@ -38,6 +38,12 @@ class UnionResponse(BaseModel):
         description="Each union step's overlap (share of the smaller operand inside the other), as told in "
         "overlap or measured with measure_overlap; empty when neither.",
     )
+    boundaries: list[float] = Field(
+        default_factory=list,
+        description="Each union step's boundary share (how much of the two operands' boundary length is left on "
+        "the union's), as told in boundary or measured with measure_overlap by models that read it; empty when "
+        "neither.",
+    )
     warnings: list[str] = Field(
         default_factory=list,
         description="What looks wrong though it was answered: an uploaded shape's implausible area, or "
@@ -54,17 +60,16 @@ async def union(
     request: Request,
     settings: SettingsDep,
     models: ModelsDep,
+    told: ToldDep,
     files: FilesField = None,
     spectra: SpectraField = None,
     units: UnitsQuery = "m",
     scale: ScaleQuery = None,
-    overlap: OverlapQuery = None,
-    measure_overlap: MeasureOverlapQuery = False,
 ) -> UnionResponse:
     """Spectrum of the union of partial scans of one body, with a 90 % interval.
 
     Two or more operands fold left to right, ((A ∪ B) ∪ C) ∪ …; one operand is returned as is
     (σ = 0). The result is exactly the same whichever order two operands come in.
     """
-    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, overlap, measure_overlap)
+    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told)
     return UnionResponse(**outcome.fields(models))

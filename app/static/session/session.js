@@ -4,13 +4,13 @@
 // height and spectrum check in headers) for the union of all parts so far. With "registered
 // scans" (one scanner's views: one frame, one pose) each scan's footprint token comes back
 // with its spectrum, POST /v1/overlap measures the new scan against the union so far's token,
-// and every union is told those overlaps. With "whole-body scans" each scan's holes are capped
+// and every union is told those overlaps and boundary shares. With "whole-body scans" each scan's holes are capped
 // before its solve (cap_holes=true): a whole body scanned standing is solved as the closed body.
 import * as THREE from "three";
 import { OrbitControls } from "/static/vendor/three/OrbitControls.js";
 import { PLYLoader } from "/static/vendor/three/PLYLoader.js";
 
-const parts = []; // {name, eigenvalues, warnings, overlap (registered scans after the first)}
+const parts = []; // {name, eigenvalues, warnings, overlap, boundary (registered scans after the first)}
 let unionFootprint = null; // registered scans: the footprint token of the union so far
 const $ = (id) => document.getElementById(id);
 const SVG = "http://www.w3.org/2000/svg";
@@ -26,23 +26,29 @@ function spectraForm() {
   return form;
 }
 
-// The union routes' query: the overlaps measured so far (one per union step), when registered.
+// The union routes' query: the overlaps and boundary shares measured so far (one per union
+// step), when registered.
 function told(query = "") {
   const overlaps = parts.slice(1).map((part) => part.overlap);
+  const boundaries = parts.slice(1).map((part) => part.boundary);
   const params = new URLSearchParams(query);
-  if ($("registered").checked && overlaps.length) params.set("overlap", overlaps.join(","));
+  if ($("registered").checked && overlaps.length) {
+    params.set("overlap", overlaps.join(","));
+    params.set("boundary", boundaries.join(","));
+  }
   const text = params.toString();
   return text ? `?${text}` : "";
 }
 
-// A registered scan's overlap with the union so far (undefined for the first scan), and the
-// token of the union with it: asked before the scan joins, so a failure leaves the session as it was.
+// A registered scan's overlap and boundary share with the union so far (undefined for the first
+// scan), and the token of the union with it: asked before the scan joins, so a failure leaves the
+// session as it was.
 async function measured(footprint) {
-  if (unionFootprint === null) return { overlap: undefined, union: footprint };
+  if (unionFootprint === null) return { overlap: undefined, boundary: undefined, union: footprint };
   const form = new FormData();
   form.append("footprints", JSON.stringify([unionFootprint, footprint]));
   const found = await answer(await fetch("/v1/overlap", { method: "POST", body: form }));
-  return { overlap: found.overlaps[0], union: found.union_footprint };
+  return { overlap: found.overlaps[0], boundary: found.boundaries[0], union: found.union_footprint };
 }
 
 async function answer(response) {
@@ -62,8 +68,8 @@ async function addScan(file) {
     const whole = $("whole").checked ? "&cap_holes=true" : "";
     const query = `units=${$("units").value}${registered ? "&footprint=true" : ""}${whole}`;
     const report = await answer(await fetch(`/v1/spectrum?${query}`, { method: "POST", body: form }));
-    const { overlap, union } = registered ? await measured(report.footprint) : {};
-    parts.push({ name: file.name, eigenvalues: report.eigenvalues, warnings: report.warnings, overlap });
+    const { overlap, boundary, union } = registered ? await measured(report.footprint) : {};
+    parts.push({ name: file.name, eigenvalues: report.eigenvalues, warnings: report.warnings, overlap, boundary });
     if (registered) unionFootprint = union;
     $("registered").disabled = true; // one kind of session: every scan registered, or none
     await refresh();
@@ -78,7 +84,9 @@ async function refresh() {
     li.textContent = `${part.name}: λ₁ = ${part.eigenvalues[0].toFixed(3)}`;
     if (part.overlap !== undefined) {
       li.dataset.overlap = part.overlap.toFixed(4);
-      li.textContent += `; ${(100 * part.overlap).toFixed(0)} % inside the scans before (measured)`;
+      li.dataset.boundary = part.boundary.toFixed(4);
+      li.textContent += `; ${(100 * part.overlap).toFixed(0)} % inside the scans before, `;
+      li.textContent += `${(100 * part.boundary).toFixed(0)} % of both edges left open (measured)`;
     }
     for (const warning of part.warnings) {
       const note = document.createElement("span");

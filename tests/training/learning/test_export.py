@@ -47,11 +47,12 @@ def test_onnx_and_pytorch_break_exact_ties_alike(tmp_path):
         assert np.abs(g - e).max() <= 1e-4 * np.abs(e).max()
 
 
-@pytest.mark.parametrize("specialist", [False, True])
+@pytest.mark.parametrize("specialist", [None, "share", "boundary"])
 def test_an_operator_that_reads_the_overlap_exports_it_as_an_input(tmp_path, specialist):
     """The graph of an operator trained with the overlap hint takes ``overlap`` (batch, 1), told or
     unknown per row, and answers as PyTorch does (random correction weights, so the hint matters;
-    with ``specialist``, a told specialist of random weights answers the told rows); one trained
+    with ``specialist``, a told specialist of random weights answers the told rows, and with
+    "boundary" a second one those told the boundary share too, an input of its own); one trained
     without it has no such input."""
     rng = np.random.default_rng(2)
     a, b = (np.cumsum(rng.uniform(1, 40, (300, 20)), axis=1) for _ in range(2))
@@ -62,15 +63,25 @@ def test_an_operator_that_reads_the_overlap_exports_it_as_an_input(tmp_path, spe
         model.set_sigma_told(0.5)
         if hint and specialist:
             model.attach_told(ToldCorrection(20, 32))
+        if hint and specialist == "boundary":
+            model.attach_told(ToldCorrection(20, 32, boundary=True))
         export_union(model.eval(), tmp_path / f"union-{hint}.onnx")
         graph = session(tmp_path / f"union-{hint}.onnx")
-        assert ("overlap" in {node.name for node in graph.get_inputs()}) == hint
+        inputs = {node.name for node in graph.get_inputs()}
+        assert ("overlap" in inputs) == hint and ("boundary" in inputs) == (hint and specialist == "boundary")
     qa, qb = a[:64].astype(np.float32), b[::-1][:64].copy().astype(np.float32)
     overlap = rng.uniform(0, 1, (64, 1)).astype(np.float32)
     overlap[::4] = -1.0
-    got = graph.run(None, {"spectrum_a": qa, "spectrum_b": qb, "overlap": overlap})
+    feeds = {"spectrum_a": qa, "spectrum_b": qb, "overlap": overlap}
+    boundary = None
+    if specialist == "boundary":
+        boundary = rng.uniform(0, 1, (64, 1)).astype(np.float32)
+        boundary[1::3] = -1.0
+        feeds["boundary"] = boundary
+    got = graph.run(None, feeds)
     with torch.no_grad():
-        expected = [x.numpy() for x in model(torch.as_tensor(qa), torch.as_tensor(qb), None, torch.as_tensor(overlap))]
+        told = torch.as_tensor(overlap), None if boundary is None else torch.as_tensor(boundary)
+        expected = [x.numpy() for x in model(torch.as_tensor(qa), torch.as_tensor(qb), None, *told)]
         nothing = model(torch.as_tensor(qa), torch.as_tensor(qb))[0].numpy()
     for g, e in zip(got, expected, strict=True):
         assert np.abs(g - e).max() <= 1e-4 * np.abs(e).max()

@@ -34,8 +34,9 @@ PARAMETRIZATIONS = (PRIOR, MONOTONE)
 BLENDS = (None, (0.5, -2.0, 1.0, 0.3, 4.0))
 # What the correction reads beside the operands and the memory: nothing more, the operands' disjoint
 # union, or that and the overlap a caller tells (random shares, a third of them unknown), the told
-# pairs answered by the correction or by a told specialist (ToldCorrection) of random weights.
-READS = ("plain", "disjoint", "told", "told_specialist")
+# pairs answered by the correction or by a told specialist (ToldCorrection) of random weights, and
+# those told their boundary share too (random shares, every other one unknown) by a second one.
+READS = ("plain", "disjoint", "told", "told_specialist", "told_boundary")
 
 
 def told_overlaps(count: int, seed: int) -> torch.Tensor:
@@ -67,20 +68,30 @@ def operator(
     model = UnionOperator(config, memory)
     last = model.correction.rho if correction == "transformer" else model.correction.head[-1]
     torch.nn.init.normal_(last.weight, std=0.05)
-    if reads == "told_specialist":
-        specialist = ToldCorrection(20, 16)
-        for parameter in specialist.net.parameters():
-            torch.nn.init.normal_(parameter, std=0.15)
-        model.attach_told(specialist)
+    if reads in ("told_specialist", "told_boundary"):
+        for boundary in (False, True)[: 1 + (reads == "told_boundary")]:
+            specialist = ToldCorrection(20, 16, boundary=boundary)
+            for parameter in specialist.net.parameters():
+                torch.nn.init.normal_(parameter, std=0.15)
+            model.attach_told(specialist)
     if blend is not None:
         model.set_blend_weights(blend)
     model.set_sigma_told(0.6)
     return model.eval()
 
 
-def told(model: UnionOperator, count: int, seed: int) -> torch.Tensor | None:
-    """What a test tells ``model`` of its pairs' overlaps: :func:`told_overlaps` if it reads them."""
-    return told_overlaps(count, seed) if model.config.overlap_hint else None
+def told_boundaries(count: int, seed: int) -> torch.Tensor:
+    """(count, 1) boundary shares as callers tell them: in 0 … 1, every other one unknown (−1)."""
+    shares = torch.rand(count, 1, generator=torch.Generator().manual_seed(seed + 1000))
+    shares[1::2] = -1.0
+    return shares
+
+
+def told(model: UnionOperator, count: int, seed: int) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+    """What a test tells ``model`` of its pairs: :func:`told_overlaps` if it reads them, and
+    :func:`told_boundaries` if it reads those too."""
+    overlap = told_overlaps(count, seed) if model.config.overlap_hint else None
+    return overlap, told_boundaries(count, seed) if model.reads_boundary else None
 
 
 def relative_logs(a: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -177,7 +188,7 @@ def test_a_monotone_union_is_never_above_either_part_whatever_its_weights(correc
                 torch.nn.init.normal_(parameter, std=0.5)
         a, b = spectra(64, 10 + seed), spectra(64, 20 + seed) * (0.2 + seed)
         with torch.no_grad():
-            union, _ = model(a, b, None, told(model, 64, seed))
+            union, _ = model(a, b, None, *told(model, 64, seed))
         assert (union <= torch.minimum(a, b) * (1 + 1e-5)).all()
 
 
@@ -194,11 +205,11 @@ def test_a_part_united_with_itself_is_itself_whatever_its_weights(correction, bl
         for name, parameter in model.correction.named_parameters():
             if "weight" in name and parameter.dim() > 1:
                 torch.nn.init.normal_(parameter, std=0.5)
-        overlap = told(model, 64, seed)
+        said = told(model, 64, seed)
         with torch.no_grad():
-            union, _ = model(a, a, None, overlap)
+            union, _ = model(a, a, None, *said)
             jittered = a * (1 + 0.01 * torch.randn(a.shape, generator=torch.Generator().manual_seed(seed)))
-            near = model(a, jittered, None, overlap)
+            near = model(a, jittered, None, *said)
             scale = common_scale(a, a)
             za = relative_log(a, scale)
             gates = model.coincidence(za, za), model.coincidence(za, relative_log(spectra(64, 31), scale))
@@ -214,10 +225,10 @@ def test_a_part_united_with_itself_is_itself_whatever_its_weights(correction, bl
 def test_union_is_exactly_commutative_and_non_decreasing(correction, parametrization, blend, reads):
     model = operator(correction, parametrization=parametrization, blend=blend, reads=reads)
     a, b = spectra(64, 1), spectra(64, 2)
-    overlap = told(model, 64, 5)
+    said = told(model, 64, 5)
     with torch.no_grad():
-        ab, sigma_ab = model(a, b, None, overlap)
-        ba, sigma_ba = model(b, a, None, overlap)
+        ab, sigma_ab = model(a, b, None, *said)
+        ba, sigma_ba = model(b, a, None, *said)
     assert torch.equal(ab, ba) and torch.equal(sigma_ab, sigma_ba)
     assert (torch.diff(ab, dim=1) >= 0).all() and (ab >= 0).all() and (sigma_ab > 0).all()
 
@@ -232,10 +243,10 @@ def test_union_is_scale_equivariant(factor, correction, blend, reads):
     to the cancellation in exp(z) − ε: a few float32 ulps of ε in the common scale."""
     model = operator(correction, blend=blend, reads=reads)
     a, b = spectra(16, 3), spectra(16, 4)
-    overlap = told(model, 16, 6)
+    said = told(model, 16, 6)
     with torch.no_grad():
-        union, sigma = model(a, b, None, overlap)
-        scaled_union, scaled_sigma = model(a * factor, b * factor, None, overlap)
+        union, sigma = model(a, b, None, *said)
+        scaled_union, scaled_sigma = model(a * factor, b * factor, None, *said)
     cancellation = 1e-6 * EPSILON * float(common_scale(a, b).max()) * factor
     torch.testing.assert_close(scaled_union, union * factor, rtol=1e-5, atol=cancellation)
     torch.testing.assert_close(scaled_sigma, sigma * factor, rtol=1e-5, atol=0)
@@ -286,6 +297,27 @@ def test_the_told_specialist_answers_the_told_pairs_and_only_them():
     assert torch.equal(first[0][~known], second[0][~known]) and torch.equal(first[1][~known], second[1][~known])
     assert ((first[0][known] - second[0][known]).abs().amax(1) > 1e-4 * first[0][known].amax(1)).all()
     assert (nested - apart).abs().max() > 1e-3 * apart.abs().max()
+
+
+def test_a_told_boundary_share_reaches_the_pairs_told_their_overlap_and_only_them():
+    """The boundary specialist answers told 0 (the union closes) and told 1 (neither covers the
+    other's boundary) differently; told it unknown (any negative value), the share's specialist
+    answers, as when told nothing of it, bit for bit as an operator without a boundary specialist;
+    for a pair whose overlap is not told, the boundary share changes nothing (the correction
+    answers it)."""
+    model = operator("transformer", reads="told_boundary")
+    a, b = spectra(16, 13), spectra(16, 14)
+    share = torch.full((16, 1), 0.4)
+    with torch.no_grad():
+        closed, open_ = (model(a, b, None, share, torch.full((16, 1), edge))[0] for edge in (0.0, 1.0))
+        nothing, unknown = model(a, b, None, share), model(a, b, None, share, torch.full((16, 1), -0.5))
+        untold = torch.full((16, 1), -1.0)
+        ignored, plain = model(a, b, None, untold, torch.full((16, 1), 0.3)), model(a, b, None, untold)
+    assert (closed - open_).abs().max() > 1e-3 * open_.abs().max()
+    assert torch.equal(nothing[0], unknown[0]) and torch.equal(nothing[1], unknown[1])
+    assert torch.equal(ignored[0], plain[0]) and torch.equal(ignored[1], plain[1])
+    share_only = operator("transformer", reads="told_specialist")(a, b, None, share)
+    assert torch.equal(share_only[0], nothing[0]) and torch.equal(share_only[1], nothing[1])
 
 
 def test_sigma_of_a_pair_told_its_overlap_takes_the_told_factor_above_its_floor():
