@@ -5,7 +5,8 @@
 Test C's chains of five consecutive camera views (unseen identities), read by the served
 localizer (``/v1/localize``'s) and the served shape decoder (``/v1/reconstruct``'s) from three
 spectra: the served operator's chained union untold (the model card's ``session_chain`` rows),
-the chain told each step's true overlap, and the true spectrum of the five views' union itself
+the chain told each step's true overlap (and boundary share, for models that read it), and the
+true spectrum of the five views' union itself
 (σ 0). Localization: symmetric area IoU and per-part coverage error against the union's true
 region, as the card scores them; decoding: vertex error against the person's rest-pose body
 after rigid alignment; identity: the person among the service's seed database of complete
@@ -41,11 +42,20 @@ def main() -> None:
     truth = data_set_rest_bodies(data).astype(np.float64)[data.identity_of(chains.shape)]
     views = chains.views
     shares = data.chain_shares()
-    answers = {}
-    for name, union in (
+    chained = [
         ("operator untold", lambda a, b, step: untold(a, b)),
         ("operator told the true overlaps", lambda a, b, step: told(a, b, shares[:, step - 1])),
-    ):
+    ]
+    if told.reads_boundary:
+        boundaries = data.chain_boundaries()
+        chained.append(
+            (
+                "operator told the true overlaps and boundary shares",
+                lambda a, b, step: told(a, b, shares[:, step - 1], boundaries[:, step - 1]),
+            )
+        )
+    answers = {}
+    for name, union in chained:
         current, sigma = views[:, 0], np.zeros_like(views[:, 0])
         for step in range(1, views.shape[1]):
             step_union, step_sigma = union(current, views[:, step], step)

@@ -43,19 +43,20 @@ def test_a_union_of_files_equals_the_union_of_their_spectra_in_either_order(serv
 
 
 def test_registered_views_sent_one_by_one_are_told_the_overlap_their_uploads_measure(service, scans):
-    """The two patches (one surface, one frame) posted with their footprints: the overlap the
-    tokens measure is the one the uploads measure together, and a union told it by every route
-    is the one measured from the uploads."""
+    """The two patches (one surface, one frame) posted with their footprints: the overlap and
+    boundary share the tokens measure are the ones the uploads measure together, and a union told
+    them by every route is the one measured from the uploads."""
     views = [service.spectrum(scan, footprint=True) for scan in scans]
     assert all(view.footprint.startswith("fp1.") for view in views)
     measured = service.overlap([view.footprint for view in views])
     together = service.union(files=scans, measure_overlap=True)
     assert measured.overlaps == pytest.approx(together.overlaps, abs=0.01)
+    assert measured.boundaries == pytest.approx(together.boundaries, abs=0.02)
     spectra = [view.eigenvalues for view in views]
-    told = service.union(spectra=spectra, overlap=measured.overlaps)
-    assert told.overlaps == pytest.approx(measured.overlaps)
+    told = service.union(spectra=spectra, overlap=measured.overlaps, boundary=measured.boundaries)
+    assert told.overlaps == pytest.approx(measured.overlaps) and told.boundaries == pytest.approx(measured.boundaries)
     np.testing.assert_allclose(told.eigenvalues, together.eigenvalues, rtol=0.02)
-    localized = service.localize(spectra=spectra, overlap=measured.overlaps)
+    localized = service.localize(spectra=spectra, overlap=measured.overlaps, boundary=measured.boundaries)
     assert localized.eigenvalues == told.eigenvalues
 
 
