@@ -34,7 +34,7 @@ WHOLE_BODY = 0.0094
 # it: 0.00290, 0.01144, 0.00130).
 SAME_REGION_TOLD, ABSORPTION_TOLD, WHOLE_BODY_TOLD = 0.0031, 0.0031, 1e-4
 # Told the boundary share too (each case's own from the template's edges; ½ for a region twice, 0
-# with the closed body), answered by the boundary specialist since model 81d6c5f0fc06 (2026-12-04):
+# with the closed body), answered by the boundary specialist since model d2fee4b1c9a4 (2026-12-04):
 # measured means 0.00280, 0.00177, < 5e-6 (worst 0.00701, 0.00965, 1e-5).
 SAME_REGION_BOUNDARY, ABSORPTION_BOUNDARY, WHOLE_BODY_BOUNDARY = 0.0031, 0.0020, 1e-4
 

@@ -418,6 +418,8 @@ def _sigma_weights_of_older_states(module: nn.Module, state: dict, prefix: str, 
         state[key] = SIGMA_FLOOR * state[prefix + "sigma_scale"]
     if prefix + "sigma_split" not in state and prefix + "sigma_scale" in state:
         state[prefix + "sigma_split"] = torch.zeros_like(state[prefix + "sigma_scale"])
+    if prefix + "sigma_boundary" not in state and prefix + "sigma_scale" in state:  # before the boundary share
+        state[prefix + "sigma_boundary"] = torch.ones_like(state[prefix + "sigma_scale"])
 
 
 class UnionOperator(nn.Module):
@@ -438,6 +440,7 @@ class UnionOperator(nn.Module):
         self.register_buffer("sigma_disagreement", torch.zeros(()))
         self.register_buffer("sigma_split", torch.zeros(()))
         self.register_buffer("sigma_told", torch.ones(()))  # σ's factor where the overlap is told
+        self.register_buffer("sigma_boundary", torch.ones(()))  # … where the boundary share is told too
         # The blend of the network's decrease with the neighbours' (:meth:`blended`): fitted on
         # validation pairs each time a run is loaded (deterministic, seconds), never trained, so
         # not part of the saved state; unfitted, its weight is 0.
@@ -481,6 +484,8 @@ class UnionOperator(nn.Module):
         union = torch.sort(torch.relu(torch.exp(z) - EPSILON), dim=-1).values
         disagreement = (1 - parts.gate) * (parts.za - parts.zb).abs()  # of operands taken for one region
         factor = 1 + parts.told * (self.sigma_told - 1)
+        if self.boundary_correction is not None and boundary is not None:  # the boundary specialist's own
+            factor = torch.where((parts.told > 0) & (boundary >= 0), self.sigma_boundary, factor)
         sigma = self.sigma(union, parts.transferred, decrease, disagreement, split, factor)
         return union * parts.scale, sigma * parts.scale
 
@@ -591,6 +596,7 @@ class UnionOperator(nn.Module):
             "sigma_disagreement": float(self.sigma_disagreement),
             "sigma_split": float(self.sigma_split),
             "sigma_told": float(self.sigma_told) if self.config.overlap_hint else None,
+            "sigma_boundary": float(self.sigma_boundary) if self.reads_boundary else None,
         }
 
     @torch.no_grad()
@@ -633,6 +639,9 @@ class UnionOperator(nn.Module):
     @torch.no_grad()
     def set_sigma_told(self, factor: float) -> None:
         self.sigma_told.fill_(factor)
+
+    def set_sigma_boundary(self, factor: float) -> None:
+        self.sigma_boundary.fill_(factor)
 
     @torch.no_grad()
     def set_sigma_weights(

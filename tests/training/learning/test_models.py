@@ -341,6 +341,26 @@ def test_sigma_of_a_pair_told_its_overlap_takes_the_told_factor_above_its_floor(
     assert torch.equal(answers[0.25][1][~known], sigma[~known])
 
 
+def test_sigma_of_a_pair_told_its_boundary_share_takes_its_own_factor():
+    """σ's factor for pairs told their boundary share too (``sigma_boundary``, fitted by
+    train_union.calibrate_told with boundaries) scales σ above its floor there and only there:
+    pairs told the share alone keep the share's factor, untold pairs none."""
+    model = operator("transformer", reads="told_boundary")
+    a, b = spectra(16, 16), spectra(16, 17)
+    overlap, boundary = told_overlaps(16, 7), told_boundaries(16, 7)
+    both = (overlap[:, 0] >= 0) & (boundary[:, 0] >= 0)
+    with torch.no_grad():
+        answers = {}
+        for factor in (1.0, 0.25, 0.0):
+            model.set_sigma_boundary(factor)
+            answers[factor] = model(a, b, None, overlap, boundary)
+    union, sigma = answers[1.0]
+    floor = answers[0.0][1]
+    assert torch.equal(union, answers[0.25][0])
+    torch.testing.assert_close(answers[0.25][1][both], floor[both] + 0.25 * (sigma[both] - floor[both]))
+    assert torch.equal(answers[0.25][1][~both], sigma[~both]) and torch.equal(answers[0.0][1][~both], sigma[~both])
+
+
 def test_localizer_basis_head_is_small_and_maps_to_vertices():
     n = 5000
     basis = np.linalg.qr(np.random.default_rng(0).standard_normal((n, 100)))[0]
