@@ -1,4 +1,5 @@
-"""Dependencies shared by the routes: settings, the models, the store, the write key."""
+"""Dependencies shared by the routes: settings, the models, the store, the write key, what a
+union request tells of its steps."""
 
 import hmac
 from collections import Counter
@@ -7,6 +8,7 @@ from typing import Annotated
 
 from fastapi import Depends, Header, Request
 
+from app.api.operands import Told, told_query
 from app.api.problems import ProblemError
 from app.core.config import Settings
 from app.inference.models import SpectralModels
@@ -38,6 +40,8 @@ async def usable_store(request: Request) -> ShapeStore:
 
 
 StoreDep = Annotated[ShapeStore, Depends(usable_store)]
+# The union routes' overlap, boundary and measure_overlap query parameters, as one.
+ToldDep = Annotated[Told, Depends(told_query)]
 
 
 def require_write_key(settings: SettingsDep, x_api_key: Annotated[str | None, Header()] = None) -> None:

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from fastapi import Depends, File, Form, Query, Request, UploadFile
+from fastapi import File, Form, Query, Request, UploadFile
 
 from app.api import form_json
 from app.api.problems import ProblemError
@@ -100,7 +100,6 @@ def told_query(
     return Told(overlap, boundary, measure_overlap)
 
 
-ToldDep = Annotated[Told, Depends(told_query)]
 NOT_TOLD = Told()
 
 

@@ -7,10 +7,10 @@ import anyio
 from fastapi import APIRouter, Query, Request, Response
 from pydantic import Field
 
-from app.api.deps import ModelsDep, SettingsDep
+from app.api.deps import ModelsDep, SettingsDep, ToldDep
 from app.api.examples import success
 from app.api.metrics import INFERENCE
-from app.api.operands import FilesField, ScaleQuery, SpectraField, ToldDep, UnitsQuery
+from app.api.operands import FilesField, ScaleQuery, SpectraField, UnitsQuery
 from app.api.routes.unions import UNION_PROBLEMS, UnionResponse
 from app.api.unions import union_of_operands
 from app.inference.template import coloured_template

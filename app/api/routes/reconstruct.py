@@ -22,14 +22,13 @@ import numpy as np
 from fastapi import APIRouter, Query, Request, Response
 from pydantic import Field
 
-from app.api.deps import ModelsDep, SettingsDep
+from app.api.deps import ModelsDep, SettingsDep, ToldDep
 from app.api.examples import success
 from app.api.operands import (
     CapHolesQuery,
     FilesField,
     ScaleQuery,
     SpectraField,
-    ToldDep,
     UnitsQuery,
 )
 from app.api.problems import ProblemError, problem_responses

@@ -25,14 +25,13 @@ import numpy as np
 from fastapi import APIRouter, Query, Request
 from pydantic import BaseModel, Field
 
-from app.api.deps import ModelsDep, SettingsDep, StoreDep
+from app.api.deps import ModelsDep, SettingsDep, StoreDep, ToldDep
 from app.api.examples import success
 from app.api.operands import (
     CapHolesQuery,
     FilesField,
     ScaleQuery,
     SpectraField,
-    ToldDep,
     UnitsQuery,
 )
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses

@@ -7,9 +7,9 @@ more than two operands is folded left to right, exactly as the operator was trai
 from fastapi import APIRouter, Request
 from pydantic import BaseModel, Field
 
-from app.api.deps import ModelsDep, SettingsDep
+from app.api.deps import ModelsDep, SettingsDep, ToldDep
 from app.api.examples import success
-from app.api.operands import FilesField, ScaleQuery, SpectraField, ToldDep, UnitsQuery
+from app.api.operands import FilesField, ScaleQuery, SpectraField, UnitsQuery
 from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.api.unions import union_of_operands
 
