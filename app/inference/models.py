@@ -80,13 +80,7 @@ def checked_overlaps(overlaps: list[float] | None, operands: int, readable: bool
     if overlaps is None:
         return [UNKNOWN_OVERLAP] * max(operands - 1, 0)
     require_overlap_reader(readable)
-    if len(overlaps) != operands - 1:
-        steps = operands - 1
-        raise InvalidOverlap(f"{len(overlaps)} overlaps for {operands} operands: give one per union step ({steps})")
-    for i, value in enumerate(overlaps):
-        if not 0.0 <= value <= 1.0:  # NaN fails too
-            raise InvalidOverlap(f"overlap[{i}] is {value}: a share of the smaller part, from 0 to 1")
-    return list(overlaps)
+    return _one_share_per_step(overlaps, operands, "overlaps", "overlap", "a share of the smaller part")
 
 
 def checked_boundaries(
@@ -101,15 +95,20 @@ def checked_boundaries(
         raise InvalidOverlap("boundary is read beside overlap: give both, one of each per union step")
     if not readable:
         raise InvalidOverlap("the served union operator does not read boundary shares; send the request without them")
-    if len(boundaries) != operands - 1:
+    meaning = "a share of the two operands' boundary length"
+    return _one_share_per_step(boundaries, operands, "boundary shares", "boundary", meaning)
+
+
+def _one_share_per_step(values: list[float], operands: int, plural: str, name: str, meaning: str) -> list[float]:
+    """``values`` when they are one per union step (``operands`` − 1) and each in 0 … 1 (NaN is
+    not); else InvalidOverlap naming the count or the value, as ``name[i]``."""
+    if len(values) != operands - 1:
         steps = operands - 1
-        raise InvalidOverlap(
-            f"{len(boundaries)} boundary shares for {operands} operands: give one per union step ({steps})"
-        )
-    for i, value in enumerate(boundaries):
+        raise InvalidOverlap(f"{len(values)} {plural} for {operands} operands: give one per union step ({steps})")
+    for i, value in enumerate(values):
         if not 0.0 <= value <= 1.0:  # NaN fails too
-            raise InvalidOverlap(f"boundary[{i}] is {value}: a share of the two operands' boundary length, from 0 to 1")
-    return list(boundaries)
+            raise InvalidOverlap(f"{name}[{i}] is {value}: {meaning}, from 0 to 1")
+    return list(values)
 
 
 @dataclass(frozen=True)
