@@ -47,16 +47,20 @@ class RegionBoundaries:
 
     def lengths(self, masks: np.ndarray) -> np.ndarray:
         """(m,) boundary length (m) of each of the (m, n) boolean vertex masks."""
-        faces = self.faces
-        inside = (masks[:, faces[:, 0]] & masks[:, faces[:, 1]] & masks[:, faces[:, 2]]).astype(np.float32)
-        sides = (self.incidence.T @ inside.T).T  # faces of the region on each edge
+        inside = faces_inside(masks.T, self.faces).astype(np.float32)  # (faces, m)
+        sides = (self.incidence.T @ inside).T  # faces of the region on each edge
         return (sides == 1) @ self.edge_length
 
     def shares(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """(m,) the boundary share of unions of (m, n) masks: L(∂(A ∪ B)) / (L(∂A) + L(∂B)), 0
-        where neither has a boundary."""
-        total = self.lengths(a) + self.lengths(b)
-        return np.where(total > 0, self.lengths(a | b) / np.maximum(total, 1e-12), 0.0)
+        """(m,) the boundary share of unions of (m, n) masks (:func:`boundary_share`)."""
+        return boundary_share(self.lengths(a), self.lengths(b), self.lengths(a | b))
+
+
+def boundary_share(a: np.ndarray, b: np.ndarray, union: np.ndarray) -> np.ndarray:
+    """L(∂(A ∪ B)) / (L(∂A) + L(∂B)) from the three boundary lengths: 0 where neither part has a
+    boundary (their union is closed too)."""
+    total = a + b
+    return np.where(total > 0, union / np.maximum(total, 1e-12), 0.0)
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from app.geometry.laplacian import mesh_operators
-from training.data.regions import RegionBoundaries
+from training.data.regions import RegionBoundaries, boundary_share
 from training.data.spectra import MESH
 from training.data.template import Template
 
@@ -159,10 +159,16 @@ class SpectralData:
     def chain_shares(self) -> np.ndarray:
         """(chains, views − 1) each step's true overlap along the Test C chains, as the left fold
         ((A ∪ B) ∪ C) ∪ … is told it: the union of the views so far against the next view."""
+        so_far, following, _ = self._chain_steps()
+        steps = [self.overlap_shares(so_far[:, i], following[:, i]) for i in range(so_far.shape[1])]
+        return np.stack(steps, axis=1) if steps else np.zeros((len(self.chains.shape), 0))
+
+    def _chain_steps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(chains, views − 1) mask indices of each step of the Test C chains' left fold: the views
+        so far (the first view, then the prefix unions), the next view, and their union."""
         chains = self.chains
         so_far = np.column_stack([chains.view_masks[:, :1], chains.union_masks[:, :-1]])
-        steps = [self.overlap_shares(so_far[:, i], chains.view_masks[:, i + 1]) for i in range(so_far.shape[1])]
-        return np.stack(steps, axis=1) if steps else np.zeros((len(chains.shape), 0))
+        return so_far, chains.view_masks[:, 1:], chains.union_masks
 
     def boundary_shares(self, mask_a: np.ndarray, mask_b: np.ndarray, mask_union: np.ndarray) -> np.ndarray:
         """(len(mask_a),) how much of the two parts' boundary length is left on their union's
@@ -171,20 +177,14 @@ class SpectralData:
         tells the union's area and boundary length, Weyl's two terms of a Dirichlet spectrum
         (measured from registered views too: app.geometry.overlap.measured_fold)."""
         lengths = self.boundary_lengths(np.concatenate([mask_a, mask_b, mask_union]))
-        a, b, union = np.split(lengths, 3)
-        total = a + b
-        return np.where(total > 0, union / np.maximum(total, 1e-12), 0.0)
+        return boundary_share(*np.split(lengths, 3))
 
     def chain_boundaries(self) -> np.ndarray:
         """(chains, views − 1) each step's true boundary share along the Test C chains, as the left
         fold is told it (:meth:`chain_shares`)."""
-        chains = self.chains
-        so_far = np.column_stack([chains.view_masks[:, :1], chains.union_masks[:, :-1]])
-        steps = [
-            self.boundary_shares(so_far[:, i], chains.view_masks[:, i + 1], chains.union_masks[:, i])
-            for i in range(so_far.shape[1])
-        ]
-        return np.stack(steps, axis=1) if steps else np.zeros((len(chains.shape), 0))
+        so_far, following, union = self._chain_steps()
+        steps = [self.boundary_shares(so_far[:, i], following[:, i], union[:, i]) for i in range(so_far.shape[1])]
+        return np.stack(steps, axis=1) if steps else np.zeros((len(self.chains.shape), 0))
 
     def boundary_lengths(self, indices: np.ndarray, chunk: int = 256) -> np.ndarray:
         """(len(indices),) the boundary length (m) of each of the masks ``indices`` on the rest-pose
