@@ -7,6 +7,8 @@ renamed input cannot reach one side only; the definition is stamped into ``MANIF
 export and checked at start-up, so a model is never served spectra computed another way.
 """
 
+from collections.abc import Collection
+
 import numpy as np
 
 UNION_FILE, LOCALIZER_FILE = "union.onnx", "localizer.onnx"
@@ -54,13 +56,23 @@ def spectrum_definition() -> dict[str, int]:
 
 
 def union_feeds(
-    a: np.ndarray, b: np.ndarray, overlap: np.ndarray | None = None, boundary: np.ndarray | None = None
+    reads: Collection[str],
+    a: np.ndarray,
+    b: np.ndarray,
+    overlap: np.ndarray | None = None,
+    boundary: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
-    """The union graph's inputs for operands of shape (batch, k), the overlap (batch, 1) for a
-    graph that reads one (None for one that does not), and the boundary share likewise."""
+    """The union graph's inputs for operands of shape (batch, k), the overlap and the boundary
+    share (batch values each, or None). ``reads`` is the graph's input names: a told input it
+    reads but that is not given is fed unknown for every row (told nothing), so no caller fills
+    it in; one given that it does not read is an error, not a hint silently lost."""
     feeds = {UNION_INPUTS[0]: a.astype(np.float32), UNION_INPUTS[1]: b.astype(np.float32)}
-    if overlap is not None:
-        feeds[UNION_OVERLAP_INPUT] = np.asarray(overlap, dtype=np.float32).reshape(-1, 1)
-    if boundary is not None:
-        feeds[UNION_BOUNDARY_INPUT] = np.asarray(boundary, dtype=np.float32).reshape(-1, 1)
+    told = ((UNION_OVERLAP_INPUT, overlap, UNKNOWN_OVERLAP), (UNION_BOUNDARY_INPUT, boundary, UNKNOWN_BOUNDARY))
+    for name, values, unknown in told:
+        if name not in reads:
+            if values is not None:
+                raise ValueError(f"this union graph does not read {name!r}")
+            continue
+        given = np.full(len(a), unknown) if values is None else values
+        feeds[name] = np.asarray(given, dtype=np.float32).reshape(-1, 1)
     return feeds

@@ -58,14 +58,19 @@ class InvalidOverlap(InputError):
     title = "Invalid overlap"
 
 
+def graph_inputs(graph: ort.InferenceSession) -> frozenset[str]:
+    """The names a graph reads (what :func:`app.contract.union_feeds` feeds a union graph by)."""
+    return frozenset(node.name for node in graph.get_inputs())
+
+
 def reads_overlap(union_graph: ort.InferenceSession) -> bool:
     """Whether a union graph takes the overlap input (graphs exported before it do not)."""
-    return UNION_OVERLAP_INPUT in {node.name for node in union_graph.get_inputs()}
+    return UNION_OVERLAP_INPUT in graph_inputs(union_graph)
 
 
 def reads_boundary(union_graph: ort.InferenceSession) -> bool:
     """Whether a union graph takes the boundary share (graphs exported before it do not)."""
-    return UNION_BOUNDARY_INPUT in {node.name for node in union_graph.get_inputs()}
+    return UNION_BOUNDARY_INPUT in graph_inputs(union_graph)
 
 
 def require_overlap_reader(readable: bool) -> None:
@@ -157,8 +162,9 @@ class SpectralModels:
         self.union_session = _session(directory / UNION_FILE, threads)
         self.localizer_session = _session(directory / LOCALIZER_FILE, threads)
         self.k = int(self.union_session.get_inputs()[0].shape[1])
-        self.reads_overlap = reads_overlap(self.union_session)  # older graphs answer unions without it
-        self.reads_boundary = reads_boundary(self.union_session)
+        self.union_inputs = graph_inputs(self.union_session)
+        self.reads_overlap = UNION_OVERLAP_INPUT in self.union_inputs  # older graphs answer unions without it
+        self.reads_boundary = UNION_BOUNDARY_INPUT in self.union_inputs
         vertex_count = self.localizer_session.get_outputs()[0].shape[1]
         if vertex_count != len(self.template.vertices):
             raise ValueError(f"localizer predicts {vertex_count} vertices, template has {len(self.template.vertices)}")
@@ -190,7 +196,7 @@ class SpectralModels:
         for other, overlap, edge in zip(spectra[1:], steps, edges, strict=True):
             told = np.array([overlap]) if self.reads_overlap else None
             boundary = np.array([edge]) if self.reads_boundary else None
-            feeds = union_feeds(current[None], other[None], told, boundary)
+            feeds = union_feeds(self.union_inputs, current[None], other[None], told, boundary)
             union, step_sigma = self.union_session.run(None, feeds)
             sigma = chained_sigma(current, sigma, union[0].astype(np.float64), step_sigma[0].astype(np.float64))
             current = union[0].astype(np.float64)
@@ -205,8 +211,7 @@ class SpectralModels:
         require_overlap_reader(self.reads_overlap)
         count = len(PROFILE_SHARES)
         batch = np.repeat(a[None], count, axis=0), np.repeat(b[None], count, axis=0)
-        boundary = np.full(count, UNKNOWN_BOUNDARY) if self.reads_boundary else None
-        union, _ = self.union_session.run(None, union_feeds(*batch, PROFILE_SHARES, boundary))
+        union, _ = self.union_session.run(None, union_feeds(self.union_inputs, *batch, PROFILE_SHARES))
         _require_finite(union)
         return union.astype(np.float64)
 

@@ -19,11 +19,9 @@ from app.contract import (
     LOCALIZER_INPUTS,
     MASK_THRESHOLD,
     UNION_FILE,
-    UNKNOWN_BOUNDARY,
-    UNKNOWN_OVERLAP,
     union_feeds,
 )
-from app.inference.models import chained_sigma, reads_boundary, reads_overlap
+from app.inference.models import chained_sigma, graph_inputs, reads_boundary, reads_overlap
 from training.data.overlaps import CAMERA
 from training.data.pairs import FULL_COVERAGE, NESTED_SHARE, PARTIAL_UNION
 from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
@@ -139,10 +137,9 @@ def served_predictors(models: Path, batch: int = 1024) -> tuple[UnionPredictor, 
     from training.learning.export import session
 
     union_graph, localizer_graph = session(models / UNION_FILE), session(models / LOCALIZER_FILE)
-    unknown = reads_overlap(union_graph)  # a graph that reads the overlap is told none
 
     def union(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return _run_union(union_graph, a, b, np.full(len(a), UNKNOWN_OVERLAP) if unknown else None, batch)
+        return _run_union(union_graph, a, b, None, batch)  # told nothing
 
     def region(spectra: np.ndarray) -> np.ndarray:
         (probability,) = localizer_graph.run(None, {LOCALIZER_INPUTS[0]: spectra.astype(np.float32)})
@@ -170,15 +167,12 @@ def _run_union(
     batch: int,
     boundary: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(union, σ) of an onnxruntime union graph, in batches; a graph that reads the boundary share
-    is told it unknown where ``boundary`` is None."""
-    if boundary is None and reads_boundary(graph):
-        boundary = np.full(len(a), UNKNOWN_BOUNDARY)
-    outputs = []
+    """(union, σ) of an onnxruntime union graph, in batches; told nothing of what is None."""
+    reads, outputs = graph_inputs(graph), []
     for start in range(0, len(a), batch):
         window = slice(start, start + batch)
         told, edge = (None if x is None else x[window] for x in (overlap, boundary))
-        outputs.append(graph.run(None, union_feeds(a[window], b[window], told, edge)))
+        outputs.append(graph.run(None, union_feeds(reads, a[window], b[window], told, edge)))
     return np.concatenate([o[0] for o in outputs]), np.concatenate([o[1] for o in outputs])
 
 

@@ -28,6 +28,7 @@ from app.contract import (
     UNKNOWN_OVERLAP,
     union_feeds,
 )
+from app.inference.models import graph_inputs
 from training.learning.localizer_net import Localizer
 from training.learning.union_net import UnionOperator
 from training.reconstruction.decoder import SpectrumDecoder
@@ -121,16 +122,15 @@ def union_parity(
     boundary: np.ndarray | None = None,
 ) -> float:
     """Largest relative difference between onnxruntime and PyTorch on these operands (and
-    overlaps and boundary shares, for an operator that reads them; unknown boundary shares where
-    not given)."""
-    if boundary is None and model.reads_boundary:
-        boundary = np.full(len(a), UNKNOWN_BOUNDARY)
+    overlaps and boundary shares, for an operator that reads them; told nothing of what is
+    None, on both sides)."""
     told, edge = (
         None if x is None else torch.as_tensor(x, dtype=torch.float32).reshape(-1, 1) for x in (overlap, boundary)
     )
     with torch.no_grad():
         expected = model.eval()(torch.as_tensor(a), torch.as_tensor(b), None, told, edge)
-    got = session(path).run(None, union_feeds(a, b, overlap, boundary))
+    graph = session(path)
+    got = graph.run(None, union_feeds(graph_inputs(graph), a, b, overlap, boundary))
     return max(_relative(g, e.numpy()) for g, e in zip(got, expected, strict=True))
 
 

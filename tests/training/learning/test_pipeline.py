@@ -15,6 +15,7 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("onnxscript")
 
 from app.contract import UNKNOWN_BOUNDARY, UNKNOWN_OVERLAP, union_feeds  # noqa: E402
+from app.inference.models import graph_inputs  # noqa: E402
 from tests.training.data.synthetic import SyntheticSource  # noqa: E402
 from training.data.build import build_dataset  # noqa: E402
 from training.data.presets import PRESETS  # noqa: E402
@@ -139,6 +140,7 @@ def test_onnx_matches_pytorch(trained):
 def test_exported_union_commutes_is_non_decreasing_and_below_both_parts(trained):
     root, _ = trained
     union = session(root / "models" / "union.onnx")
+    reads = graph_inputs(union)
     data = np.load(root / "data" / "dataset.npz")
     a = data["spectra"][data["spec_a"]].astype(np.float32)
     b = data["spectra"][data["spec_b"]].astype(np.float32)
@@ -147,13 +149,13 @@ def test_exported_union_commutes_is_non_decreasing_and_below_both_parts(trained)
     overlap[::3] = UNKNOWN_OVERLAP
     boundary = spectral.boundary_shares(data["mask_a"], data["mask_b"], data["mask_union"])  # as the preset reads it
     boundary[1::2] = UNKNOWN_BOUNDARY
-    ab, sigma = union.run(None, union_feeds(a, b, overlap, boundary))
-    ba, _ = union.run(None, union_feeds(b, a, overlap, boundary))
+    ab, sigma = union.run(None, union_feeds(reads, a, b, overlap, boundary))
+    ba, _ = union.run(None, union_feeds(reads, b, a, overlap, boundary))
     assert np.max(np.abs(ab - ba)) <= 1e-6
     assert (np.diff(ab, axis=1) >= 0).all() and (sigma > 0).all()
     # A closed body's λ₁ is a numerical zero, sometimes −1e-13: the union's is clipped to 0.
     assert (ab <= np.maximum(np.minimum(a, b), 0) * (1 + 1e-6)).all()
-    scaled, _ = union.run(None, union_feeds(4 * a, 4 * b, overlap, boundary))
+    scaled, _ = union.run(None, union_feeds(reads, 4 * a, 4 * b, overlap, boundary))
     np.testing.assert_allclose(scaled, 4 * ab, rtol=1e-5)
 
 
