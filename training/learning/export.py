@@ -33,7 +33,7 @@ from training.learning.localizer_net import Localizer
 from training.learning.union_net import UnionOperator
 from training.reconstruction.decoder import SpectrumDecoder
 
-OPSET = 18
+OPSET = 23  # ONNX's own Attention operator (union_net.EncoderLayer); Gelu one node since 20
 SOURCE_METADATA = "pkg.torch.onnx.stack_trace"  # per node: where in our Python it was traced
 
 

@@ -353,16 +353,18 @@ class TransformerCorrection(nn.Module):
 
 
 class EncoderLayer(nn.TransformerEncoderLayer):
-    """PyTorch's pre-norm encoder layer whose self-attention, outside training, is written out in
-    a dozen tensor operations instead of PyTorch's general multi-head attention.
+    """PyTorch's pre-norm encoder layer whose self-attention, outside training, is ONNX's own
+    ``Attention`` operator (opset 23; ``torch.onnx.ops.attention``, whose PyTorch form is its
+    reference) on the in-projection's three thirds, instead of PyTorch's general multi-head
+    attention.
 
     Why: exported, PyTorch's attention is ~40 nodes per layer of reshapes, transposes, squeezes
-    and slices, and at batch 1 onnxruntime's time is per node: written out, the union graph
-    holds 470 nodes instead of 641 and runs in ~1.31 instead of ~1.50 ms
-    (`benchmarks/RESULTS.md`), computing the same to float32 rounding
-    (`tests/training/learning/test_models.py` compares the two). Training keeps PyTorch's own
-    attention, whose gradients the served checkpoint was trained with; so do masks, which the
-    operator never passes.
+    and slices, and at batch 1 onnxruntime's time is per node: one ``Split`` and one
+    ``Attention`` (the heads split inside the operator) leave the union graph ~200 nodes smaller
+    and faster at every batch size (`benchmarks/RESULTS.md`), computing the same to float32
+    rounding (`tests/training/learning/test_models.py` compares the two). Training keeps
+    PyTorch's own attention, whose gradients the served checkpoint was trained with; so do
+    masks, which the operator never passes.
     """
 
     def _sa_block(
@@ -371,13 +373,9 @@ class EncoderLayer(nn.TransformerEncoderLayer):
         if self.training or attn_mask is not None or key_padding_mask is not None:
             return super()._sa_block(x, attn_mask, key_padding_mask, is_causal)
         attention = self.self_attn
-        batch, tokens, width = x.shape
         heads = attention.num_heads
-        per_head = width // heads
-        qkv = F.linear(x, attention.in_proj_weight, attention.in_proj_bias)
-        q, k, v = qkv.view(batch, tokens, 3, heads, per_head).permute(2, 0, 3, 1, 4)
-        weights = torch.softmax((q * per_head**-0.5) @ k.transpose(-1, -2), dim=-1)
-        mixed = (weights @ v).transpose(1, 2).reshape(batch, tokens, width)
+        q, k, v = F.linear(x, attention.in_proj_weight, attention.in_proj_bias).chunk(3, dim=-1)
+        mixed = torch.onnx.ops.attention(q, k, v, q_num_heads=heads, kv_num_heads=heads)[0]
         return self.dropout1(F.linear(mixed, attention.out_proj.weight, attention.out_proj.bias))
 
 
@@ -394,7 +392,8 @@ class Proposal(NamedTuple):
     scale (B, 1); both operands and their minimum in z (B, k); what each neighbour's parts added
     (B, n, k) and that taken off this pair's minimum; the neighbours' key distances (B, n); the
     coincidence gate (B, 1); the corrected prior (B, k) and the network's decrease from the
-    minimum (B, k; None for the PRIOR parametrization); 1 where the caller told the overlap (B, 1)."""
+    minimum (B, k; None for the PRIOR parametrization); 1 where the caller told the overlap (B, 1);
+    the operands' disjoint union in z (B, k), computed once for every reader."""
 
     scale: Tensor
     za: Tensor
@@ -407,6 +406,7 @@ class Proposal(NamedTuple):
     proposed: Tensor
     decrease: Tensor | None
     told: Tensor
+    disjoint: Tensor
 
 
 def _sigma_weights_of_older_states(module: nn.Module, state: dict, prefix: str, *_: object) -> None:
@@ -472,9 +472,9 @@ class UnionOperator(nn.Module):
             else:
                 decrease = self.blended(parts.decrease, median, features, parts.told)
             if self.told_correction is not None and overlap is not None:
-                told = self.told_decrease(a, b, parts, overlap, self.told_correction)
+                told = self.told_decrease(parts, overlap, self.told_correction)
                 if self.boundary_correction is not None and boundary is not None:
-                    with_boundary = self.told_decrease(a, b, parts, overlap, self.boundary_correction, boundary)
+                    with_boundary = self.told_decrease(parts, overlap, self.boundary_correction, boundary)
                     told = torch.where(boundary >= 0, with_boundary, told)
                 decrease = torch.where(parts.told > 0, told, decrease)
             z = parts.floor - decrease
@@ -501,8 +501,9 @@ class UnionOperator(nn.Module):
         added = floors - priors  # what each neighbour's parts added to each other, in z
         transferred = floor[:, None] - added  # … taken off this pair's minimum
         read = [priors, transferred]
+        disjoint = relative_log(disjoint_union(a, b), scale)
         if self.config.disjoint_prior:
-            read.append(relative_log(disjoint_union(a, b), scale)[:, None])
+            read.append(disjoint[:, None])
         told = torch.zeros_like(floor[:, :1])  # a hint this operator cannot read is not told
         if self.config.overlap_hint:
             hint, told = overlap_rows(overlap, floor)
@@ -511,21 +512,15 @@ class UnionOperator(nn.Module):
         gate = self.coincidence(za, zb)
         proposed = priors[:, 0] + change
         decrease = self.decreased(floor, proposed, gate) if self.config.parametrization == MONOTONE else None
-        return Proposal(scale, za, zb, floor, added, transferred, distances, gate, proposed, decrease, told)
+        return Proposal(scale, za, zb, floor, added, transferred, distances, gate, proposed, decrease, told, disjoint)
 
     @staticmethod
     def told_decrease(
-        a: Tensor,
-        b: Tensor,
-        parts: "Proposal",
-        overlap: Tensor,
-        specialist: ToldCorrection,
-        boundary: Tensor | None = None,
+        parts: "Proposal", overlap: Tensor, specialist: ToldCorrection, boundary: Tensor | None = None
     ) -> Tensor:
         """(B, k) a told specialist's decrease (:class:`ToldCorrection`), gated like the
         correction's, so that one spectrum twice is its own union whatever it is told."""
-        disjoint = relative_log(disjoint_union(a, b), parts.scale)
-        return parts.gate * specialist(parts.za, parts.zb, disjoint, specialist.told(overlap, boundary))
+        return parts.gate * specialist(parts.za, parts.zb, parts.disjoint, specialist.told(overlap, boundary))
 
     @property
     def reads_boundary(self) -> bool:
