@@ -6,20 +6,22 @@ Test C's chains of five consecutive camera views (unseen identities), read by th
 localizer (``/v1/localize``'s) and the served shape decoder (``/v1/reconstruct``'s) from three
 spectra: the served operator's chained union untold (the model card's ``session_chain`` rows),
 the chain told each step's true overlap (and boundary share, for models that read it), and the
-true spectrum of the five views' union itself
-(σ 0). Localization: symmetric area IoU and per-part coverage error against the union's true
-region, as the card scores them; decoding: vertex error against the person's rest-pose body
-after rigid alignment; identity: the person among the service's seed database of complete
-shapes (``models/shapes.npz``), ranked as ``/v1/retrieve`` ranks (an open surface through the
-closed spectrum of the body rebuilt from it), the session's own posed body left out, top-1/5/10
-as the card's retrieval table counts them. Where the true union does no
-better, what limits the row is not the union operator's error.
+true spectrum of the five views' union itself (σ 0). Localization: symmetric area IoU and
+per-part coverage error against the union's true region, as the card scores them, the region as
+``/v1/localize`` answers it (the chained union's, holding each view's own; the true union's
+spectrum alone stands for one merged upload); decoding: vertex error against the person's
+rest-pose body after rigid alignment; identity: the person among the service's seed database of
+complete shapes (``models/shapes.npz``), ranked as ``/v1/retrieve`` ranks (an open surface
+through the closed spectrum of the body rebuilt from it), the session's own posed body left
+out, top-1/5/10 as the card's retrieval table counts them. Where the true union does no better,
+what limits the row is not the union operator's error.
 """
 
 import numpy as np
 
 from app.inference.body import open_surface
 from app.inference.models import SpectralModels, chained_sigma
+from app.inference.template import holding_parts
 from training.benchmark_arguments import benchmark_parser
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors, served_told_predictor
@@ -27,6 +29,8 @@ from training.learning.masks import SERVED_LOCALIZER, symmetric_scores
 from training.learning.shapedna import hit_rates
 from training.reconstruction.evaluate import body_scores, closed_spectra
 from training.reconstruction.train import data_set_rest_bodies
+
+TRUE_UNION = "the true union's spectrum"  # one operand: the five views uploaded merged
 
 
 def main() -> None:
@@ -63,7 +67,7 @@ def main() -> None:
             current = step_union
         answers[name] = (current, sigma)
     final = chains.unions[:, -1].astype(np.float64)
-    answers["the true union's spectrum"] = (final, np.zeros_like(final))
+    answers[TRUE_UNION] = (final, np.zeros_like(final))
     covered = data.masks(chains.union_masks[:, -1]) @ models.vertex_area / models.vertex_area.sum()
     print(f"{len(final)} sessions; their union covers {np.median(covered):.2f} of the body (median)")
     region = localizers[SERVED_LOCALIZER]
@@ -77,8 +81,12 @@ def main() -> None:
         "| identity top-1 / 5 / 10 |"
     )
     print("|---|---|---|---|---|---|---|---|")
+    view_regions = [region(views[:, step]) for step in range(views.shape[1])]
     for name, (spectra, sigma) in answers.items():
-        located = symmetric_scores(region(spectra), true_region, data.vertex_area, template.mirror, template.labels)
+        located_union = region(spectra)
+        if name != TRUE_UNION:  # the five views were the operands: their regions are held (/v1/localize)
+            located_union = holding_parts(located_union, view_regions, data.vertex_area, template.mirror)
+        located = symmetric_scores(located_union, true_region, data.vertex_area, template.mirror, template.labels)
         bodies = np.stack([models.reconstruct(s, g) for s, g in zip(spectra, sigma, strict=True)])
         score = body_scores(bodies, truth, template.faces)
         rebuilt = closed_spectra(bodies, template.faces, models.k)

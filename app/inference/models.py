@@ -7,6 +7,7 @@ template, so a mismatched set of artefacts is found at start-up, not on the firs
 """
 
 import hashlib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,7 +33,7 @@ from app.core.errors import InputError
 from app.geometry.laplacian import mesh_operators
 from app.inference.manifest import verify_manifest
 from app.inference.spectra import InvalidSpectrum
-from app.inference.template import PART_NAMES, Template, part_coverage
+from app.inference.template import PART_NAMES, Template, holding_parts, part_coverage
 
 
 @dataclass(frozen=True)
@@ -215,11 +216,15 @@ class SpectralModels:
         _require_finite(union)
         return union.astype(np.float64)
 
-    def localize(self, spectrum: np.ndarray) -> Region:
-        """The template region whose spectrum this is (up to left/right: spectra cannot tell)."""
-        (probability,) = self.localizer_session.run(None, {LOCALIZER_INPUTS[0]: spectrum[None].astype(np.float32)})
+    def localize(self, spectrum: np.ndarray, parts: Sequence[np.ndarray] = ()) -> Region:
+        """The template region whose spectrum this is (up to left/right: spectra cannot tell);
+        for a union, given the spectra of its ``parts``, grown to hold each part's own region
+        (:func:`holding_parts`: a union contains its parts)."""
+        spectra = np.stack([spectrum, *parts]).astype(np.float32)
+        (probability,) = self.localizer_session.run(None, {LOCALIZER_INPUTS[0]: spectra})
         _require_finite(probability)
-        inside = probability[0] >= MASK_THRESHOLD
+        masks = probability >= MASK_THRESHOLD
+        inside = holding_parts(masks[:1], list(masks[1:, None]), self.vertex_area, self.template.mirror)[0]
         shares = part_coverage(inside, self.vertex_area, self.template.labels)
         coverage = {name: float(share) for name, share in zip(PART_NAMES, shares, strict=True)}
         area = self.vertex_area

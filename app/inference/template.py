@@ -67,6 +67,32 @@ def part_coverage(masks: np.ndarray, vertex_area: np.ndarray, labels: np.ndarray
     return np.clip(covered, 0.0, 1.0)  # a whole part sums its shares to 1 give or take rounding
 
 
+def turned_towards(reference: np.ndarray, masks: np.ndarray, vertex_area: np.ndarray, mirror: np.ndarray) -> np.ndarray:
+    """(m, n) each boolean template mask, or its mirror image where that overlaps ``reference``
+    (m, n) by more area: a localized region is right only up to left/right (a region and its
+    mirror image have one spectrum), and a part lies on its union's side."""
+    flipped = masks[:, mirror]
+    keep = ((reference & masks) @ vertex_area >= (reference & flipped) @ vertex_area)[:, None]
+    return np.where(keep, masks, flipped)
+
+
+def holding_parts(
+    union: np.ndarray, parts: list[np.ndarray], vertex_area: np.ndarray, mirror: np.ndarray
+) -> np.ndarray:
+    """(m, n) the localized region of a union, grown to hold each of its parts' own localized
+    regions (m, n each), turned to its side (:func:`turned_towards`): a union contains its parts.
+
+    Why: the localizer reads one spectrum, and a union's spectrum places it smaller than it is
+    (and a part it has never seen as a union is often placed better alone); holding the parts
+    raised every row of the card's localization, the IoU by 0–8 points and the part-coverage
+    error down by up to 10 (models/MODEL_CARD.md). Symmetric in the parts, as the union is.
+    """
+    region = union.copy()
+    for part in parts:
+        region |= turned_towards(union, part, vertex_area, mirror)
+    return region
+
+
 REGION_COLOUR = (214, 64, 44, 255)
 REST_COLOUR = (200, 200, 200, 255)
 

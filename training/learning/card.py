@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from training.learning.masks import SERVED_LOCALIZER
+from training.learning.masks import UNION_WITH_PARTS
 
 BEGIN, END = "<!-- metrics:begin -->", "<!-- metrics:end -->"
 PAPER_ROWS = [
@@ -108,7 +108,7 @@ def strata_table(metrics: dict) -> list[str]:
     lines = [
         "| split / stratum / variant | n | operator mae / mre | 90 % coverage | above min | "
         + " | ".join(f"{b} mre" for b in BASELINES)
-        + " | best baseline ÷ operator | localized union: IoU / part cov. err. |",
+        + " | best baseline ÷ operator | served region (union's, holding the parts'): IoU / part cov. err. |",
         "|---" * (7 + len(BASELINES)) + "|",
     ]
     for key, row in metrics.get("strata", {}).items():
@@ -120,7 +120,7 @@ def strata_table(metrics: dict) -> list[str]:
             f"| {key} | {row['rows']} | {ours['mae']:.2f} / {percent(ours['mre'])} | "
             f"{percent(row['interval_coverage'])} | {percent(row['above_minimum'])} | "
             + " | ".join(percent(union[b]["mre"]) for b in BASELINES)
-            + f" | {ratio} | {_localization_cell(row['localization'][SERVED_LOCALIZER], ('iou',))} |"
+            + f" | {ratio} | {_localization_cell(row['localization'][UNION_WITH_PARTS], ('iou',))} |"
         )
     return lines
 
@@ -297,6 +297,9 @@ def render(metrics: dict, command: str) -> str:
         *per_eigenvalue_table(metrics),
         "",
         "### Localization (Tables 2 and 3): symmetric, area-weighted",
+        "Each column a localizer on the predicted union (`all` is the served one), but `parts_united`: the",
+        f"served localizer on each part, the two regions united; and `{UNION_WITH_PARTS}`, what `/v1/localize`",
+        "answers: the served localizer's region of the union grown to hold each part's own (turned to its side).",
         "",
         *localization_table(metrics),
         "",

@@ -22,13 +22,20 @@ from app.contract import (
     union_feeds,
 )
 from app.inference.models import chained_sigma, graph_inputs, reads_boundary, reads_overlap
+from app.inference.template import holding_parts
 from training.data.overlaps import CAMERA
 from training.data.pairs import FULL_COVERAGE, NESTED_SHARE, PARTIAL_UNION
 from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
 from training.learning.baselines import UnionLookup, disjoint_union, elementwise_min, larger_part
 from training.learning.data import PairTable, SpectralData
 from training.learning.localizer_net import Localizer
-from training.learning.masks import PARTS_UNITED, SERVED_LOCALIZER, symmetric_scores, united_by_mirror_rule
+from training.learning.masks import (
+    PARTS_UNITED,
+    SERVED_LOCALIZER,
+    UNION_WITH_PARTS,
+    symmetric_scores,
+    united_by_mirror_rule,
+)
 from training.learning.spectral_errors import spectral_errors
 from training.learning.train_localizer import localize
 from training.learning.train_union import predict
@@ -223,9 +230,11 @@ class Evaluator:
         out["localization"] = {}
         template = self.data.template
         predicted = {name: region(mean) for name, region in self.localizers.items()}
-        if SERVED_LOCALIZER in self.localizers:  # the second opinion: each part localized, then united
-            part_masks = (self.localizers[SERVED_LOCALIZER](part) for part in (rows.a, rows.b))
+        if SERVED_LOCALIZER in self.localizers:  # each part localized: united, and held by the union's region
+            part_masks = [self.localizers[SERVED_LOCALIZER](part) for part in (rows.a, rows.b)]
             predicted[PARTS_UNITED] = united_by_mirror_rule(*part_masks, self.areas, template.mirror)
+            served = predicted[SERVED_LOCALIZER]
+            predicted[UNION_WITH_PARTS] = holding_parts(served, part_masks, self.areas, template.mirror)
         for name, masks in predicted.items():
             scores = symmetric_scores(masks, truth, self.areas, template.mirror, template.labels)
             out["localization"][name] = {score: float(values.mean()) for score, values in vars(scores).items()}

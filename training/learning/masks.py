@@ -10,10 +10,13 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from app.inference.template import PART_NAMES, part_coverage
+from app.inference.template import PART_NAMES, part_coverage, turned_towards
 
 SERVED_LOCALIZER = "all"  # the localizer trained on every training identity, the one the service loads
 PARTS_UNITED = "parts_united"  # the served localizer on each part, the two regions united
+# What the service answers (app.inference.template.holding_parts): the union's region grown to
+# hold each part's own, by the served localizer.
+UNION_WITH_PARTS = "union_with_parts"
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,4 @@ def symmetric_scores(
 def united_by_mirror_rule(first: np.ndarray, second: np.ndarray, weights: np.ndarray, mirror: np.ndarray) -> np.ndarray:
     """(m, n) union of two parts' localized masks, the second in the orientation that overlaps the
     first more: each is right only up to left/right, and parts of one scan overlap or touch."""
-    flipped = second[:, mirror]
-    keep = ((first & second) @ weights >= (first & flipped) @ weights)[:, None]
-    return first | np.where(keep, second, flipped)
+    return first | turned_towards(first, second, weights, mirror)

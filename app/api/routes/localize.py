@@ -4,6 +4,7 @@ import time
 from typing import Annotated, Literal
 
 import anyio
+import numpy as np
 from fastapi import APIRouter, Query, Request, Response
 from pydantic import Field
 
@@ -46,10 +47,13 @@ async def localize(
         Literal["json", "ply"], Query(description="ply: the template mesh with the region as vertex colours.")
     ] = "json",
 ) -> LocalizeResponse | Response:
-    """Where on the template body the union of the operands lies, and how much of each part it covers."""
+    """Where on the template body the union of the operands lies, and how much of each part it
+    covers: the localizer's region of the union, grown to hold each operand's own region."""
     outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told)
     started = time.perf_counter()
-    region = await anyio.to_thread.run_sync(models.localize, outcome.result.eigenvalues)
+    # A union holds each of its operands' own regions; one operand is its own union.
+    parts = [np.asarray(o.eigenvalues) for o in outcome.operands] if len(outcome.operands) > 1 else []
+    region = await anyio.to_thread.run_sync(models.localize, outcome.result.eigenvalues, parts)
     INFERENCE.labels("localizer").observe(time.perf_counter() - started)
     if format == "ply":
         ply = await anyio.to_thread.run_sync(coloured_template, models.template, region.vertices)
