@@ -34,7 +34,10 @@ RECONSTRUCTION_OUTPUTS = ("vertices",)  # float32 (batch, template vertices, 3):
 # decoder's graph reads such a measured spectrum as a scan, and /v1/reconstruct judges its round
 # trip as an open surface's (figures in training/reconstruction/decoder.py)
 BOUNDARY_RATIO = 0.01
-MASK_THRESHOLD = 0.5  # a template vertex is in the region when the localizer's probability reaches this
+# The paper's rule, by which the card scores each localizer: a template vertex is in the region
+# when the localizer's probability reaches this. The service answers by expected area instead
+# (app.inference.template.localized_region).
+MASK_THRESHOLD = 0.5
 INTERVAL_Z = 1.6449  # σ is calibrated so that union ± INTERVAL_Z·σ holds 90 % of held-out eigenvalues
 # The overlap shares tried for two operands whose share is not told (SpectralModels.union_profile,
 # /v1/retrieve, the card's retrieval table): two part spectra do not tell how much the parts

@@ -19,6 +19,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist
 
+from app.contract import MASK_THRESHOLD
+from app.inference.template import localized_region
 from training.benchmark_arguments import benchmark_parser
 from training.data.overlaps import CAMERA
 from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION
@@ -74,7 +76,8 @@ def main() -> None:
             distance = cdist(log_features(rows.a), train_features)
             distance[rows.shape_a[:, None] == train.shape_a[None]] = np.inf
             methods = {
-                "served localizer": region(rows.a),
+                "served localizer, p ≥ 0.5": region(rows.a) >= MASK_THRESHOLD,
+                "as /v1/localize answers (expected area)": localized_region(region(rows.a), [], areas, template.mirror),
                 "nearest training spectrum's mask": data.masks(train.mask_a[np.argmin(distance, 1)]),
                 "random training part (chance)": data.masks(train.mask_a[rng.integers(len(train), size=len(rows))]),
             }

@@ -8,8 +8,8 @@ spectra: the served operator's chained union untold (the model card's ``session_
 the chain told each step's true overlap (and boundary share, for models that read it), and the
 true spectrum of the five views' union itself (σ 0). Localization: symmetric area IoU and
 per-part coverage error against the union's true region, as the card scores them, the region as
-``/v1/localize`` answers it (the chained union's, holding each view's own; the true union's
-spectrum alone stands for one merged upload); decoding: vertex error against the person's
+``/v1/localize`` answers it (expected-area regions, the chained union's holding each view's
+own; the true union's spectrum alone stands for one merged upload); decoding: vertex error against the person's
 rest-pose body after rigid alignment; identity: the person among the service's seed database of
 complete shapes (``models/shapes.npz``), ranked as ``/v1/retrieve`` ranks (an open surface
 through the closed spectrum of the body rebuilt from it), the session's own posed body left
@@ -21,7 +21,7 @@ import numpy as np
 
 from app.inference.body import open_surface
 from app.inference.models import SpectralModels, chained_sigma
-from app.inference.template import holding_parts
+from app.inference.template import localized_region
 from training.benchmark_arguments import benchmark_parser
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors, served_told_predictor
@@ -81,11 +81,10 @@ def main() -> None:
         "| identity top-1 / 5 / 10 |"
     )
     print("|---|---|---|---|---|---|---|---|")
-    view_regions = [region(views[:, step]) for step in range(views.shape[1])]
+    view_probabilities = [region(views[:, step]) for step in range(views.shape[1])]
     for name, (spectra, sigma) in answers.items():
-        located_union = region(spectra)
-        if name != TRUE_UNION:  # the five views were the operands: their regions are held (/v1/localize)
-            located_union = holding_parts(located_union, view_regions, data.vertex_area, template.mirror)
+        parts = [] if name == TRUE_UNION else view_probabilities  # the five views were the operands
+        located_union = localized_region(region(spectra), parts, data.vertex_area, template.mirror)
         located = symmetric_scores(located_union, true_region, data.vertex_area, template.mirror, template.labels)
         bodies = np.stack([models.reconstruct(s, g) for s, g in zip(spectra, sigma, strict=True)])
         score = body_scores(bodies, truth, template.faces)

@@ -18,7 +18,6 @@ from app.contract import (
     INTERVAL_Z,
     LOCALIZER_FILE,
     LOCALIZER_INPUTS,
-    MASK_THRESHOLD,
     PROFILE_SHARES,
     RECONSTRUCTION_FILE,
     RECONSTRUCTION_INPUTS,
@@ -33,7 +32,7 @@ from app.core.errors import InputError
 from app.geometry.laplacian import mesh_operators
 from app.inference.manifest import verify_manifest
 from app.inference.spectra import InvalidSpectrum
-from app.inference.template import PART_NAMES, Template, holding_parts, part_coverage
+from app.inference.template import PART_NAMES, Template, localized_region, part_coverage
 
 
 @dataclass(frozen=True)
@@ -217,14 +216,15 @@ class SpectralModels:
         return union.astype(np.float64)
 
     def localize(self, spectrum: np.ndarray, parts: Sequence[np.ndarray] = ()) -> Region:
-        """The template region whose spectrum this is (up to left/right: spectra cannot tell);
-        for a union, given the spectra of its ``parts``, grown to hold each part's own region
-        (:func:`holding_parts`: a union contains its parts)."""
+        """The template region whose spectrum this is (up to left/right: spectra cannot tell), as
+        large as the localizer expects it; for a union, given the spectra of its ``parts``, grown
+        to hold each part's own region (:func:`localized_region`)."""
         spectra = np.stack([spectrum, *parts]).astype(np.float32)
         (probability,) = self.localizer_session.run(None, {LOCALIZER_INPUTS[0]: spectra})
         _require_finite(probability)
-        masks = probability >= MASK_THRESHOLD
-        inside = holding_parts(masks[:1], list(masks[1:, None]), self.vertex_area, self.template.mirror)[0]
+        parts_probability = list(probability[1:, None].astype(np.float64))
+        union_probability = probability[:1].astype(np.float64)
+        inside = localized_region(union_probability, parts_probability, self.vertex_area, self.template.mirror)[0]
         shares = part_coverage(inside, self.vertex_area, self.template.labels)
         coverage = {name: float(share) for name, share in zip(PART_NAMES, shares, strict=True)}
         area = self.vertex_area

@@ -22,7 +22,7 @@ from app.contract import (
     union_feeds,
 )
 from app.inference.models import chained_sigma, graph_inputs, reads_boundary, reads_overlap
-from app.inference.template import holding_parts
+from app.inference.template import localized_region
 from training.data.overlaps import CAMERA
 from training.data.pairs import FULL_COVERAGE, NESTED_SHARE, PARTIAL_UNION
 from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
@@ -37,7 +37,7 @@ from training.learning.masks import (
     united_by_mirror_rule,
 )
 from training.learning.spectral_errors import spectral_errors
-from training.learning.train_localizer import localize
+from training.learning.train_localizer import probabilities
 from training.learning.train_union import predict
 from training.learning.union_net import UnionOperator
 
@@ -119,14 +119,14 @@ TOLD_NOISE = 0.1
 # The told boundary share as a caller measures it: the true one plus this much absolute noise
 # (twice the mean error of one measured from registered views, benchmarks/measured_overlap.py).
 BOUNDARY_NOISE = 0.06
-RegionPredictor = Callable[[np.ndarray], np.ndarray]  # spectra → (m, n) boolean template masks
+RegionPredictor = Callable[[np.ndarray], np.ndarray]  # spectra → (m, n) each template vertex's probability
 
 
 def trained_predictors(
     union: UnionOperator, localizers: dict[str, Localizer]
 ) -> tuple[UnionPredictor, dict[str, RegionPredictor]]:
     """The PyTorch models as the evaluator's predictors."""
-    regions = {name: (lambda spectra, model=model: localize(model, spectra)) for name, model in localizers.items()}
+    regions = {name: (lambda spectra, model=model: probabilities(model, spectra)) for name, model in localizers.items()}
     return (lambda a, b: predict(union, a, b)), regions
 
 
@@ -149,8 +149,7 @@ def served_predictors(models: Path, batch: int = 1024) -> tuple[UnionPredictor, 
         return _run_union(union_graph, a, b, None, batch)  # told nothing
 
     def region(spectra: np.ndarray) -> np.ndarray:
-        (probability,) = localizer_graph.run(None, {LOCALIZER_INPUTS[0]: spectra.astype(np.float32)})
-        return probability >= MASK_THRESHOLD
+        return localizer_graph.run(None, {LOCALIZER_INPUTS[0]: spectra.astype(np.float32)})[0]
 
     return union, {SERVED_LOCALIZER: region}
 
@@ -229,12 +228,15 @@ class Evaluator:
         truth = self.data.masks(rows.mask_union)
         out["localization"] = {}
         template = self.data.template
-        predicted = {name: region(mean) for name, region in self.localizers.items()}
-        if SERVED_LOCALIZER in self.localizers:  # each part localized: united, and held by the union's region
-            part_masks = [self.localizers[SERVED_LOCALIZER](part) for part in (rows.a, rows.b)]
-            predicted[PARTS_UNITED] = united_by_mirror_rule(*part_masks, self.areas, template.mirror)
-            served = predicted[SERVED_LOCALIZER]
-            predicted[UNION_WITH_PARTS] = holding_parts(served, part_masks, self.areas, template.mirror)
+        probability = {name: region(mean) for name, region in self.localizers.items()}
+        predicted = {name: p >= MASK_THRESHOLD for name, p in probability.items()}  # the paper's rule
+        if SERVED_LOCALIZER in self.localizers:  # each part localized: united, and as /v1/localize answers
+            parts = [self.localizers[SERVED_LOCALIZER](part) for part in (rows.a, rows.b)]
+            predicted[PARTS_UNITED] = united_by_mirror_rule(
+                *(p >= MASK_THRESHOLD for p in parts), self.areas, template.mirror
+            )
+            served = probability[SERVED_LOCALIZER]
+            predicted[UNION_WITH_PARTS] = localized_region(served, parts, self.areas, template.mirror)
         for name, masks in predicted.items():
             scores = symmetric_scores(masks, truth, self.areas, template.mirror, template.labels)
             out["localization"][name] = {score: float(values.mean()) for score, values in vars(scores).items()}

@@ -62,12 +62,22 @@ def symmetric_loss(
 @torch.no_grad()
 def localize(model: Localizer, spectra: np.ndarray, batch: int = 512) -> np.ndarray:
     """(m, n) boolean masks at probability ≥ 0.5."""
+    return _read_logits(model, spectra, batch, lambda logits: logits >= 0)
+
+
+def probabilities(model: Localizer, spectra: np.ndarray, batch: int = 512) -> np.ndarray:
+    """(m, n) each template vertex's probability of lying in each spectrum's region."""
+    return _read_logits(model, spectra, batch, torch.sigmoid)
+
+
+def _read_logits(model: Localizer, spectra: np.ndarray, batch: int, read) -> np.ndarray:
     model.eval()
     device = next(model.parameters()).device
     out = []
-    for start in range(0, len(spectra), batch):
-        chunk = torch.as_tensor(spectra[start : start + batch], dtype=torch.float32, device=device)
-        out.append((model.logits(chunk) >= 0).cpu().numpy())
+    with torch.no_grad():
+        for start in range(0, len(spectra), batch):
+            chunk = torch.as_tensor(spectra[start : start + batch], dtype=torch.float32, device=device)
+            out.append(read(model.logits(chunk)).cpu().numpy())
     return np.concatenate(out)
 
 

@@ -48,7 +48,8 @@ async def localize(
     ] = "json",
 ) -> LocalizeResponse | Response:
     """Where on the template body the union of the operands lies, and how much of each part it
-    covers: the localizer's region of the union, grown to hold each operand's own region."""
+    covers: the localizer's region of the union, as large as its probabilities expect, grown to
+    hold each operand's own region."""
     outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told)
     started = time.perf_counter()
     # A union holds each of its operands' own regions; one operand is its own union.

@@ -54,6 +54,10 @@ def test_an_operator_that_reads_the_overlap_exports_it_as_an_input(tmp_path, spe
     with ``specialist``, a told specialist of random weights answers the told rows, and with
     "boundary" a second one those told the boundary share too, an input of its own); one trained
     without it has no such input."""
+    # The weights are random: seeded, so that whether the hint moves the union does not depend on
+    # which tests ran before (some draws put every proposal far above the minimum, where the
+    # decrease is exactly 0 whatever the correction reads).
+    torch.manual_seed(0)
     rng = np.random.default_rng(2)
     a, b = (np.cumsum(rng.uniform(1, 40, (300, 20)), axis=1) for _ in range(2))
     union = np.minimum(a, b) * 0.7
