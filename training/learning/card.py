@@ -108,7 +108,7 @@ def strata_table(metrics: dict) -> list[str]:
     lines = [
         "| split / stratum / variant | n | operator mae / mre | 90 % coverage | above min | "
         + " | ".join(f"{b} mre" for b in BASELINES)
-        + " | best baseline ÷ operator | served region (union's, holding the parts'): IoU / part cov. err. |",
+        + " | best baseline ÷ operator | served region (/v1/localize): IoU / part cov. err. |",
         "|---" * (7 + len(BASELINES)) + "|",
     ]
     for key, row in metrics.get("strata", {}).items():
@@ -297,9 +297,10 @@ def render(metrics: dict, command: str) -> str:
         *per_eigenvalue_table(metrics),
         "",
         "### Localization (Tables 2 and 3): symmetric, area-weighted",
-        "Each column a localizer on the predicted union (`all` is the served one), but `parts_united`: the",
-        f"served localizer on each part, the two regions united; and `{UNION_WITH_PARTS}`, what `/v1/localize`",
-        "answers: the served localizer's region of the union grown to hold each part's own (turned to its side).",
+        "Each column a localizer on the predicted union at p ≥ 0.5 (`all` is the served one), but `parts_united`:",
+        f"the served localizer on each part, the two regions united; and `{UNION_WITH_PARTS}`, what `/v1/localize`",
+        "answers: each region the most probable vertices up to the area the served localizer expects, the",
+        "union's grown to hold each part's own (turned to its side).",
         "",
         *localization_table(metrics),
         "",

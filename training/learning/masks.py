@@ -14,8 +14,8 @@ from app.inference.template import PART_NAMES, part_coverage, turned_towards
 
 SERVED_LOCALIZER = "all"  # the localizer trained on every training identity, the one the service loads
 PARTS_UNITED = "parts_united"  # the served localizer on each part, the two regions united
-# What the service answers (app.inference.template.holding_parts): the union's region grown to
-# hold each part's own, by the served localizer.
+# What the service answers (app.inference.template.localized_region): expected-area regions by
+# the served localizer, the union's grown to hold each part's own.
 UNION_WITH_PARTS = "union_with_parts"
 
 
