@@ -222,9 +222,8 @@ class SpectralModels:
         spectra = np.stack([spectrum, *parts]).astype(np.float32)
         (probability,) = self.localizer_session.run(None, {LOCALIZER_INPUTS[0]: spectra})
         _require_finite(probability)
-        parts_probability = list(probability[1:, None].astype(np.float64))
-        union_probability = probability[:1].astype(np.float64)
-        inside = localized_region(union_probability, parts_probability, self.vertex_area, self.template.mirror)[0]
+        parts_probability = list(probability[1:, None])  # one (1, n) row per part
+        inside = localized_region(probability[:1], parts_probability, self.vertex_area, self.template.mirror)[0]
         shares = part_coverage(inside, self.vertex_area, self.template.labels)
         coverage = {name: float(share) for name, share in zip(PART_NAMES, shares, strict=True)}
         area = self.vertex_area
