@@ -249,18 +249,24 @@ def session_table(metrics: dict) -> list[str]:
     """Test C by kind of session pair, then its chains of consecutive views."""
     methods = ("operator", *BASELINES)
     lines = [
-        "| Test C pair kind / chain | n | " + " | ".join(f"{m} mre" for m in methods) + " | 90 % coverage |",
-        "|---" * (len(methods) + 3) + "|",
+        "| Test C pair kind / chain | n | "
+        + " | ".join(f"{m} mre" for m in methods)
+        + " | 90 % coverage | served region (/v1/localize): IoU / part cov. err. |",
+        "|---" * (len(methods) + 4) + "|",
     ]
     for kind, row in metrics.get("test_c_kinds", {}).items():
         cells = " | ".join(percent(row["union"][m]["mre"]) for m in methods)
-        lines.append(f"| {kind} | {row['rows']} | {cells} | — |")
+        lines.append(f"| {kind} | {row['rows']} | {cells} | — | (by stratum above) |")
     chains = metrics.get("test_c_chains", {})
     for length, row in chains.items():
         if length == "associativity":
             continue
         cells = " | ".join(percent(row["union"][m]["mre"]) if m in row["union"] else "—" for m in methods)
-        lines.append(f"| chain of {length} views | {row['rows']} | {cells} | {percent(row['interval_coverage'])} |")
+        region = row.get("localization", {}).get(UNION_WITH_PARTS)
+        located = "—" if region is None else _localization_cell(region, ("iou",))
+        lines.append(
+            f"| chain of {length} views | {row['rows']} | {cells} | {percent(row['interval_coverage'])} | {located} |"
+        )
     if "associativity" in chains:
         gap = chains["associativity"]
         lines += [

@@ -226,7 +226,6 @@ class Evaluator:
         if not localization:
             return out
         truth = self.data.masks(rows.mask_union)
-        out["localization"] = {}
         template = self.data.template
         probability = {name: region(mean) for name, region in self.localizers.items()}
         predicted = {name: p >= MASK_THRESHOLD for name, p in probability.items()}  # the paper's rule
@@ -237,10 +236,14 @@ class Evaluator:
             )
             served = probability[SERVED_LOCALIZER]
             predicted[UNION_WITH_PARTS] = localized_region(served, parts, self.areas, template.mirror)
-        for name, masks in predicted.items():
-            scores = symmetric_scores(masks, truth, self.areas, template.mirror, template.labels)
-            out["localization"][name] = {score: float(values.mean()) for score, values in vars(scores).items()}
+        out["localization"] = {name: self._scores(masks, truth) for name, masks in predicted.items()}
         return out
+
+    def _scores(self, masks: np.ndarray, truth: np.ndarray) -> dict[str, float]:
+        """Mean symmetric scores of (m, n) predicted masks against the true ones."""
+        template = self.data.template
+        scores = symmetric_scores(masks, truth, self.areas, template.mirror, template.labels)
+        return {score: float(values.mean()) for score, values in vars(scores).items()}
 
     def stratified(self, rows: PairTable, prefix: str) -> dict:
         """:meth:`row` per overlap stratum and variant, keyed ``prefix/stratum/variant``."""
@@ -316,6 +319,8 @@ class Evaluator:
                 boundaries = self.data.chain_boundaries()
         sigma = np.zeros_like(views[:, 0])
         shares = self.data.chain_shares() if self.told is not None else None
+        served = self.localizers.get(SERVED_LOCALIZER)
+        view_probabilities = [] if served is None else [served(views[:, i]) for i in range(views.shape[1])]
         for length in range(2, views.shape[1] + 1):
             step = views[:, length - 1]
             union, step_sigma = self.union(current["operator"], step)
@@ -337,6 +342,11 @@ class Evaluator:
                 "union": {name: spectral_errors(p, truth) for name, p in methods.items()},
                 "interval_coverage": float(np.mean(np.abs(current["operator"] - truth) <= INTERVAL_Z * sigma)),
             }
+            if served is not None:  # as /v1/localize answers the session's views
+                parts = view_probabilities[:length]
+                region = localized_region(served(current["operator"]), parts, self.areas, self.data.template.mirror)
+                truth_region = self.data.masks(chains.union_masks[:, length - 2])
+                out[str(length)]["localization"] = {UNION_WITH_PARTS: self._scores(region, truth_region)}
         left = self.union(self.union(views[:, 0], views[:, 1])[0], views[:, 2])[0]
         right = self.union(views[:, 0], self.union(views[:, 1], views[:, 2])[0])[0]
         gap = np.abs(left - right) / np.maximum(np.abs(right), 1e-6)
