@@ -464,6 +464,7 @@ class UnionOperator(nn.Module):
         ``boundary`` (B, 1): the boundary share where a caller knows it besides the overlap,
         negative where not; read only by a told specialist with ``config.told_boundary``."""
         parts = self.proposal(a, b, exclude, overlap)
+        boundary_read = self.reads_boundary and boundary is not None  # else the share's specialist answers
         if self.config.parametrization == MONOTONE:
             median, features = self.blend_terms(parts)
             split = (parts.decrease - median).abs()  # the network's and the neighbours' answers apart
@@ -473,7 +474,7 @@ class UnionOperator(nn.Module):
                 decrease = self.blended(parts.decrease, median, features, parts.told)
             if self.told_correction is not None and overlap is not None:
                 told = self.told_decrease(parts, overlap, self.told_correction)
-                if self.boundary_correction is not None and boundary is not None:
+                if boundary_read:
                     with_boundary = self.told_decrease(parts, overlap, self.boundary_correction, boundary)
                     told = torch.where(boundary >= 0, with_boundary, told)
                 decrease = torch.where(parts.told > 0, told, decrease)
@@ -484,7 +485,7 @@ class UnionOperator(nn.Module):
         union = torch.sort(torch.relu(torch.exp(z) - EPSILON), dim=-1).values
         disagreement = (1 - parts.gate) * (parts.za - parts.zb).abs()  # of operands taken for one region
         factor = 1 + parts.told * (self.sigma_told - 1)
-        if self.boundary_correction is not None and boundary is not None:  # the boundary specialist's own
+        if boundary_read:  # the boundary specialist's own
             factor = torch.where((parts.told > 0) & (boundary >= 0), self.sigma_boundary, factor)
         sigma = self.sigma(union, parts.transferred, decrease, disagreement, split, factor)
         return union * parts.scale, sigma * parts.scale
