@@ -207,6 +207,37 @@ def test_a_registered_session_measures_each_scan_s_overlap_and_tells_the_union(b
     assert told["part_coverage"] != pytest.approx(untold["part_coverage"], abs=1e-3)  # told it, the answer moved
 
 
+# Before the page's own script: /v1/models answers that the union reads the overlap alone (as
+# a model set without the boundary share does), and every URL fetched is kept.
+_MODELS_WITHOUT_BOUNDARY = """
+window.fetchedUrls = [];
+const served = window.fetch.bind(window);
+window.fetch = async (url, options) => {
+  window.fetchedUrls.push(String(url));
+  const response = await served(url, options);
+  if (String(url) !== "/v1/models") return response;
+  const models = await response.json();
+  models.told = models.told.filter((name) => name !== "boundary");
+  return new Response(JSON.stringify(models), { status: 200, headers: { "content-type": "application/json" } });
+};
+"""
+
+
+def test_a_registered_session_tells_the_union_only_what_the_models_read(base, scans, browser):
+    """A model set that cannot be told the boundary share answers 422 to one: the page reads
+    /v1/models' "told" and sends the overlap alone."""
+    injected = browser.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": _MODELS_WITHOUT_BOUNDARY})
+    try:
+        _drop_one_at_a_time(browser, base, scans, registered=True)
+        urls = browser.execute_script("return window.fetchedUrls")
+    finally:
+        browser.execute_cdp_cmd("Page.removeScriptToEvaluateOnNewDocument", {"identifier": injected["identifier"]})
+    unions = [url for url in urls if url.startswith(("/v1/localize", "/v1/retrieve", "/v1/reconstruct"))]
+    told = [url for url in unions if "overlap=" in url]
+    assert len(told) == 4, unions  # the second scan's four union requests, told its overlap
+    assert not any("boundary=" in url for url in unions), unions
+
+
 @pytest.fixture(scope="module")
 def soleless(tmp_path_factory) -> Path:
     """The template body scanned standing: the whole body but its soles."""

@@ -26,15 +26,21 @@ function spectraForm() {
   return form;
 }
 
+// What the served union operator can be told (GET /v1/models' "told"): a model set that reads
+// no boundary share answers 422 to one, so the page sends only what the models read.
+const toldInputs = fetch("/v1/models")
+  .then(answer)
+  .then((models) => new Set(models.told));
+
 // The union routes' query: the overlaps and boundary shares measured so far (one per union
-// step), when registered.
-function told(query = "") {
-  const overlaps = parts.slice(1).map((part) => part.overlap);
-  const boundaries = parts.slice(1).map((part) => part.boundary);
+// step), when registered, each only if the models read it.
+async function told(query = "") {
+  const reads = await toldInputs;
   const params = new URLSearchParams(query);
-  if ($("registered").checked && overlaps.length) {
-    params.set("overlap", overlaps.join(","));
-    params.set("boundary", boundaries.join(","));
+  if ($("registered").checked && parts.length > 1) {
+    for (const name of ["overlap", "boundary"]) {
+      if (reads.has(name)) params.set(name, parts.slice(1).map((part) => part[name]).join(","));
+    }
   }
   const text = params.toString();
   return text ? `?${text}` : "";
@@ -99,10 +105,10 @@ async function refresh() {
   $("parts").replaceChildren(...parts.map(item));
   setStatus(`Uniting ${parts.length} part${parts.length > 1 ? "s" : ""}…`);
   const [region, ply, found, rebuilt] = await Promise.all([
-    fetch(`/v1/localize${told()}`, { method: "POST", body: spectraForm() }).then(answer),
-    fetch(`/v1/localize${told("format=ply")}`, { method: "POST", body: spectraForm() }).then((r) => r.arrayBuffer()),
-    fetch(`/v1/retrieve${told("top=5")}`, { method: "POST", body: spectraForm() }).then(answer),
-    fetch(`/v1/reconstruct${told("format=ply")}`, { method: "POST", body: spectraForm() }),
+    fetch(`/v1/localize${await told()}`, { method: "POST", body: spectraForm() }).then(answer),
+    fetch(`/v1/localize${await told("format=ply")}`, { method: "POST", body: spectraForm() }).then((r) => r.arrayBuffer()),
+    fetch(`/v1/retrieve${await told("top=5")}`, { method: "POST", body: spectraForm() }).then(answer),
+    fetch(`/v1/reconstruct${await told("format=ply")}`, { method: "POST", body: spectraForm() }),
   ]);
   plot(region);
   covered.show(ply);
