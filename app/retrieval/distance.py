@@ -27,5 +27,11 @@ def nearest_of(queries: np.ndarray, spectra: np.ndarray) -> tuple[np.ndarray, np
     """(m,) each of (m, k) stored spectra at its distance to the nearest of one (k,) or several
     (n, k) query spectra, and (m,) which query that is: how a share profile ranks (``/v1/retrieve``
     with two operands whose overlap is not told)."""
-    each = np.stack([distances(query, spectra) for query in np.atleast_2d(np.asarray(queries, dtype=np.float64))])
+    return nearest_in_features(np.atleast_2d(np.asarray(queries, dtype=np.float64)), features(spectra))
+
+
+def nearest_in_features(queries: np.ndarray, stored: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`nearest_of` for (m, k - 1) stored :func:`features` computed once (a store's
+    in-memory copy) and (n, k) query spectra."""
+    each = np.stack([np.linalg.norm(stored - query, axis=1) for query in features(queries)])
     return each.min(axis=0), each.argmin(axis=0)

@@ -2,11 +2,13 @@
 
 SQLite is the embedded default: WAL so readers never block the writer, ``synchronous=FULL`` so
 an acknowledged write survives a crash, one short-lived connection per operation so threads
-and processes share the file safely. k-NN is brute force in numpy: a database of thousands
-of 20-value spectra is read and ranked in well under a millisecond per hundred rows.
+and processes share the file safely. k-NN is exact and brute force in numpy, over an in-memory
+copy of the stored features (:class:`FeatureCopy`): reading every row back from the file cost
+~5 µs a row a query (0.5 s at 10⁵ shapes), the distances alone cost a tenth of that.
 """
 
 import sqlite3
+import threading
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -17,17 +19,29 @@ from typing import Protocol
 
 import numpy as np
 
-from app.retrieval.distance import nearest_of
+from app.retrieval.distance import features, nearest_in_features
 
-SCHEMA = """
-CREATE TABLE IF NOT EXISTS shapes (
-    id TEXT PRIMARY KEY,
-    label TEXT NOT NULL,
-    source TEXT NOT NULL,
-    spectrum BLOB NOT NULL,
-    created_at TEXT NOT NULL
+SCHEMA = (
+    """CREATE TABLE IF NOT EXISTS shapes (
+        id TEXT PRIMARY KEY,
+        label TEXT NOT NULL,
+        source TEXT NOT NULL,
+        spectrum BLOB NOT NULL,
+        created_at TEXT NOT NULL
+    )""",
+    # What an in-memory copy of the features needs to know it is the file's: which file this is
+    # (a random name given when the table is made: a restored backup is another file) and how
+    # many rows were ever deleted from it, counted in the file by whichever process deleted them.
+    """CREATE TABLE IF NOT EXISTS store_state (
+        id INTEGER PRIMARY KEY CHECK (id = 1),
+        file TEXT NOT NULL,
+        deletions INTEGER NOT NULL
+    )""",
+    "INSERT OR IGNORE INTO store_state (id, file, deletions) VALUES (1, lower(hex(randomblob(16))), 0)",
+    """CREATE TRIGGER IF NOT EXISTS shapes_deleted AFTER DELETE ON shapes
+        BEGIN UPDATE store_state SET deletions = deletions + 1 WHERE id = 1; END""",
 )
-"""
+COLUMNS = "id, label, source, spectrum, created_at"
 
 
 class StoreUnavailable(Exception):
@@ -82,7 +96,9 @@ class SQLiteStore:
             raise StoreUnavailable(f"cannot create {path.parent}: {exc}") from exc
         with self._connect() as connection:
             connection.execute("PRAGMA journal_mode=WAL")
-            connection.execute(SCHEMA)
+            for statement in SCHEMA:
+                connection.execute(statement)
+        self._copy = FeatureCopy()
 
     @contextmanager
     def _connect(self) -> Iterator[sqlite3.Connection]:
@@ -138,7 +154,7 @@ class SQLiteStore:
     def page(self, offset: int, limit: int) -> list[ShapeRecord]:
         with self._connect() as connection:
             rows = connection.execute(
-                "SELECT id, label, source, spectrum, created_at FROM shapes ORDER BY created_at, id LIMIT ? OFFSET ?",
+                f"SELECT {COLUMNS} FROM shapes ORDER BY created_at, id LIMIT ? OFFSET ?",
                 (limit, offset),
             ).fetchall()
         return [_record(row) for row in rows]
@@ -149,13 +165,61 @@ class SQLiteStore:
 
     def nearest(self, spectra: np.ndarray, top: int) -> list[Match]:
         with self._connect() as connection:
-            rows = connection.execute("SELECT id, label, source, spectrum, created_at FROM shapes").fetchall()
-        if not rows:
-            return []
-        stored = np.stack([np.frombuffer(row[3], dtype=np.float64) for row in rows])
-        distance, query = nearest_of(spectra, stored)
-        order = np.argsort(distance, kind="stable")[:top]
-        return [Match(_record(rows[i]), float(distance[i]), int(query[i])) for i in order]
+            connection.execute("BEGIN")  # one snapshot: the copy's rows and the records read back
+            rowids, stored = self._copy.synced(connection)
+            if len(rowids) == 0:
+                return []
+            distance, query = nearest_in_features(np.asarray(spectra, dtype=np.float64), stored)
+            order = np.argsort(distance, kind="stable")[:top]
+            chosen = rowids[order].tolist()
+            rows = connection.execute(
+                f"SELECT rowid, {COLUMNS} FROM shapes WHERE rowid IN ({','.join('?' * len(chosen))})", chosen
+            ).fetchall()
+        by_rowid = {row[0]: row[1:] for row in rows}
+        return [Match(_record(by_rowid[int(rowids[i])]), float(distance[i]), int(query[i])) for i in order]
+
+
+class FeatureCopy:
+    """The stored shapes' retrieval features in memory, in rowid order, kept in step with the file.
+
+    While no row is deleted, rows only ever arrive with a rowid above every rowid before them:
+    each query reads just the rows past the last one the copy has, and a query whose snapshot is
+    older than the copy (another thread read first) sees a prefix of it. A deletion (counted by
+    a trigger in the file, whichever process made it) or another file at the same path makes it
+    read everything again. Ranking is then what reading every row gave: the same features, in
+    the same order. Thread-safe: the service's k-NN requests share one store.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._version: tuple[str, int] | None = None  # (file, deletions) the copy was read at
+        self._rowids = np.zeros(0, dtype=np.int64)
+        self._features = np.zeros((0, 0))
+
+    def synced(self, connection: sqlite3.Connection) -> tuple[np.ndarray, np.ndarray]:
+        """(rowids (m,), features (m, k - 1)) of every stored shape, as ``connection`` sees them."""
+        file, deletions = connection.execute("SELECT file, deletions FROM store_state WHERE id = 1").fetchone()
+        (last,) = connection.execute("SELECT COALESCE(MAX(rowid), 0) FROM shapes").fetchone()
+        with self._lock:
+            known = int(self._rowids[-1]) if len(self._rowids) else 0
+            if (file, deletions) != self._version:
+                self._version = (file, deletions)
+                self._rowids, self._features = _features_after(connection, 0)
+            elif last > known:
+                rowids, features = _features_after(connection, known)
+                self._rowids = np.concatenate([self._rowids, rowids])
+                self._features = np.concatenate([self._features.reshape(-1, features.shape[1]), features])
+            end = int(np.searchsorted(self._rowids, last, side="right"))
+            return self._rowids[:end], self._features[:end]
+
+
+def _features_after(connection: sqlite3.Connection, rowid: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rowids, features) of the stored shapes past ``rowid``, in rowid order."""
+    rows = connection.execute("SELECT rowid, spectrum FROM shapes WHERE rowid > ? ORDER BY rowid", (rowid,)).fetchall()
+    if not rows:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 0))
+    spectra = np.stack([np.frombuffer(row[1], dtype=np.float64) for row in rows])
+    return np.array([row[0] for row in rows], dtype=np.int64), features(spectra)
 
 
 def _blob(spectrum: np.ndarray) -> bytes:
