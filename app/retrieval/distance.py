@@ -6,6 +6,8 @@ and λ₁ is left out because it is 0 for every closed surface. No area normalis
 is part of what identifies a person.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 FLOOR = 1e-9
@@ -27,11 +29,39 @@ def nearest_of(queries: np.ndarray, spectra: np.ndarray) -> tuple[np.ndarray, np
     """(m,) each of (m, k) stored spectra at its distance to the nearest of one (k,) or several
     (n, k) query spectra, and (m,) which query that is: how a share profile ranks (``/v1/retrieve``
     with two operands whose overlap is not told)."""
-    return nearest_in_features(np.atleast_2d(np.asarray(queries, dtype=np.float64)), features(spectra))
-
-
-def nearest_in_features(queries: np.ndarray, stored: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`nearest_of` for (m, k - 1) stored :func:`features` computed once (a store's
-    in-memory copy) and (n, k) query spectra."""
-    each = np.stack([np.linalg.norm(stored - query, axis=1) for query in features(queries)])
+    each = np.stack([distances(query, spectra) for query in np.atleast_2d(np.asarray(queries, dtype=np.float64))])
     return each.min(axis=0), each.argmin(axis=0)
+
+
+class Ranked(NamedTuple):
+    """Stored rows in ranking order, their distances, and which query each is nearest to."""
+
+    rows: np.ndarray
+    distances: np.ndarray
+    queries: np.ndarray
+
+
+def top_matches(queries: np.ndarray, stored: np.ndarray, squared: np.ndarray, top: int) -> Ranked:
+    """The ``top`` rows of (m, k - 1) stored :func:`features` nearest to one (k,) or any of (n, k)
+    query spectra, exactly as ``np.argsort(nearest_of(queries, spectra)[0], kind="stable")[:top]``
+    orders them, with their distances and the query each is nearest to; ``squared``: each stored
+    row's squared norm.
+
+    Why not :func:`nearest_of` and a sort: its differences take a pass over every stored row per
+    query, and a stable sort of every distance took ~0.2 s at 10⁶ rows. Here one matrix product
+    ranks every row by |f|² − 2 f·q + |q|², which float64 rounding moves by less than ``slack``
+    from the true squared distance; only rows that rounding could have kept out of the top are
+    then measured by differences and sorted (distance, then row: the stable order).
+    """
+    asked = features(queries)
+    approximate = (squared[None, :] - 2 * asked @ stored.T + (asked**2).sum(axis=1)[:, None]).min(axis=0)
+    candidates = np.arange(len(stored))
+    if 0 < top < len(stored):
+        # (|f| + |q|)² ≤ 2 (|f|² + |q|²) bounds every product's terms; 64 ulps of that, twice.
+        slack = 2 * 64 * np.finfo(np.float64).eps * 2 * (squared.max() + (asked**2).sum(axis=1).max())
+        kth = np.partition(approximate, top - 1)[top - 1]
+        candidates = np.flatnonzero(approximate <= kth + slack)
+    each = np.stack([np.linalg.norm(stored[candidates] - query, axis=1) for query in asked])
+    distance, query = each.min(axis=0), each.argmin(axis=0)
+    order = np.lexsort((candidates, distance))[:top]
+    return Ranked(candidates[order], distance[order], query[order])

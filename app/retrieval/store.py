@@ -19,7 +19,7 @@ from typing import Protocol
 
 import numpy as np
 
-from app.retrieval.distance import features, nearest_in_features
+from app.retrieval.distance import features, top_matches
 
 SCHEMA = (
     """CREATE TABLE IF NOT EXISTS shapes (
@@ -166,17 +166,19 @@ class SQLiteStore:
     def nearest(self, spectra: np.ndarray, top: int) -> list[Match]:
         with self._connect() as connection:
             connection.execute("BEGIN")  # one snapshot: the copy's rows and the records read back
-            rowids, stored = self._copy.synced(connection)
+            rowids, stored, squared = self._copy.synced(connection)
             if len(rowids) == 0:
                 return []
-            distance, query = nearest_in_features(np.asarray(spectra, dtype=np.float64), stored)
-            order = np.argsort(distance, kind="stable")[:top]
-            chosen = rowids[order].tolist()
+            ranked = top_matches(np.asarray(spectra, dtype=np.float64), stored, squared, top)
+            chosen = rowids[ranked.rows].tolist()
             rows = connection.execute(
                 f"SELECT rowid, {COLUMNS} FROM shapes WHERE rowid IN ({','.join('?' * len(chosen))})", chosen
             ).fetchall()
         by_rowid = {row[0]: row[1:] for row in rows}
-        return [Match(_record(by_rowid[int(rowids[i])]), float(distance[i]), int(query[i])) for i in order]
+        return [
+            Match(_record(by_rowid[rowid]), float(distance), int(query))
+            for rowid, distance, query in zip(chosen, ranked.distances, ranked.queries, strict=True)
+        ]
 
 
 class FeatureCopy:
@@ -195,9 +197,11 @@ class FeatureCopy:
         self._version: tuple[str, int] | None = None  # (file, deletions) the copy was read at
         self._rowids = np.zeros(0, dtype=np.int64)
         self._features = np.zeros((0, 0))
+        self._squared = np.zeros(0)  # each row's squared norm, for top_matches
 
-    def synced(self, connection: sqlite3.Connection) -> tuple[np.ndarray, np.ndarray]:
-        """(rowids (m,), features (m, k - 1)) of every stored shape, as ``connection`` sees them."""
+    def synced(self, connection: sqlite3.Connection) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rowids (m,), features (m, k - 1), their squared norms (m,)) of every stored shape, as
+        ``connection`` sees them."""
         file, deletions = connection.execute("SELECT file, deletions FROM store_state WHERE id = 1").fetchone()
         (last,) = connection.execute("SELECT COALESCE(MAX(rowid), 0) FROM shapes").fetchone()
         with self._lock:
@@ -205,12 +209,14 @@ class FeatureCopy:
             if (file, deletions) != self._version:
                 self._version = (file, deletions)
                 self._rowids, self._features = _features_after(connection, 0)
+                self._squared = (self._features**2).sum(axis=1)
             elif last > known:
                 rowids, features = _features_after(connection, known)
                 self._rowids = np.concatenate([self._rowids, rowids])
                 self._features = np.concatenate([self._features.reshape(-1, features.shape[1]), features])
+                self._squared = np.concatenate([self._squared, (features**2).sum(axis=1)])
             end = int(np.searchsorted(self._rowids, last, side="right"))
-            return self._rowids[:end], self._features[:end]
+            return self._rowids[:end], self._features[:end], self._squared[:end]
 
 
 def _features_after(connection: sqlite3.Connection, rowid: int) -> tuple[np.ndarray, np.ndarray]:
