@@ -94,11 +94,13 @@ class SQLiteStore:
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise StoreUnavailable(f"cannot create {path.parent}: {exc}") from exc
+        self._copy = FeatureCopy()
         with self._connect() as connection:
             connection.execute("PRAGMA journal_mode=WAL")
             for statement in SCHEMA:
                 connection.execute(statement)
-        self._copy = FeatureCopy()
+        with self._connect() as connection:  # read the features now, not in the first query (~5 s at 10⁶ rows)
+            self._copy.synced(connection)
 
     @contextmanager
     def _connect(self) -> Iterator[sqlite3.Connection]:
