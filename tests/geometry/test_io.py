@@ -1,7 +1,10 @@
 """Every accepted format round-trips from bytes; nothing in a file reaches outside the upload."""
 
+import io
+
 import numpy as np
 import pytest
+import trimesh
 
 from app.geometry.errors import TooManyVertices, UnreadableFile, UnsupportedFileType
 from app.geometry.io import ExternalReference, load_shape, resolve_file_type, unit_scale
@@ -130,3 +133,23 @@ def test_ply_header_with_a_billion_vertices_is_refused_before_parsing():
 def test_an_obj_whose_vertices_are_not_triples_is_unreadable_not_a_crash(vertex_lines):
     with pytest.raises(UnreadableFile, match="not \\(x, y, z\\) triples"):
         load_shape(vertex_lines + b"f 2 3 4\n", "obj", max_vertices=CAP)
+
+
+@pytest.mark.parametrize("file_type", ["ply", "obj", "off", "stl", "glb"])
+def test_a_one_mesh_file_loads_as_trimesh_flattens_it(patch, file_type):
+    """One untransformed mesh is taken as it is, without trimesh's flattening: the same arrays."""
+    data = mesh_bytes(patch, file_type)
+    flat = trimesh.load_scene(io.BytesIO(data), file_type=file_type, process=False).to_mesh()
+    loaded = load_shape(data, file_type, scale=1.0, max_vertices=CAP)
+    np.testing.assert_array_equal(loaded.vertices, flat.vertices)
+    np.testing.assert_array_equal(loaded.faces, flat.faces)
+
+
+def test_a_placed_mesh_in_a_scene_is_loaded_where_it_is_placed(patch):
+    """A GLB node's transform is applied (the scene is flattened as trimesh does)."""
+    scene = trimesh.Scene()
+    moved = np.eye(4)
+    moved[:3, 3] = [0.5, -0.2, 0.1]
+    scene.add_geometry(trimesh.Trimesh(patch.vertices, patch.faces, process=False), transform=moved)
+    loaded = load_shape(scene.export(file_type="glb"), "glb", scale=1.0, max_vertices=CAP)
+    np.testing.assert_allclose(loaded.vertices, patch.vertices + [0.5, -0.2, 0.1], atol=1e-6)
