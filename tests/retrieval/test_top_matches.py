@@ -4,7 +4,7 @@ its answer must be, to the bit, the stable sort of every exact distance (``neare
 import numpy as np
 import pytest
 
-from app.retrieval.distance import features, nearest_of, top_matches
+from app.retrieval.distance import SAMPLE_ROWS, features, nearest_of, top_matches
 from tests.retrieval.test_stores import spectra
 
 
@@ -54,3 +54,21 @@ def test_rows_nearer_than_rounding_are_still_ranked_exactly():
     rows, distances, _ = _stable_truth(query, stored, 10)
     np.testing.assert_array_equal(ranked.rows, rows)
     np.testing.assert_array_equal(ranked.distances, distances)
+
+
+@pytest.mark.parametrize("queries", [1, 11])
+def test_a_store_larger_than_the_sample_is_ranked_exactly(queries):
+    """Past SAMPLE_ROWS rows the candidates' bound comes from a sample: the answer is still the
+    exact stable sort, near-ties included."""
+    rng = np.random.default_rng(26)
+    body = spectra(1, 27)[0]
+    copies = body * (1 + 1e-14 * rng.standard_normal((30, len(body))))
+    stored = np.concatenate([spectra(5 * SAMPLE_ROWS, 28), copies, spectra(SAMPLE_ROWS, 29)])
+    asked = (body * 1.02)[None] * np.linspace(1.0, 0.8, queries)[:, None]
+    stored_features = features(stored)
+    for top in (1, 10, 25, 100):
+        ranked = top_matches(asked, stored_features, (stored_features**2).sum(axis=1), top)
+        rows, distances, nearest = _stable_truth(asked, stored, top)
+        np.testing.assert_array_equal(ranked.rows, rows)
+        np.testing.assert_array_equal(ranked.distances, distances)
+        np.testing.assert_array_equal(ranked.queries, nearest)
