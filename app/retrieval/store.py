@@ -3,12 +3,11 @@
 SQLite is the embedded default: WAL so readers never block the writer, ``synchronous=FULL`` so
 an acknowledged write survives a crash, one short-lived connection per operation so threads
 and processes share the file safely. k-NN is exact and brute force in numpy, over an in-memory
-copy of the stored features (:class:`FeatureCopy`): reading every row back from the file cost
-~5 µs a row a query (0.5 s at 10⁵ shapes), the distances alone cost a tenth of that.
+copy of the stored features (:mod:`app.retrieval.feature_copy`), which reads from the file only
+the rows added since the last query.
 """
 
 import sqlite3
-import threading
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -19,7 +18,8 @@ from typing import Protocol
 
 import numpy as np
 
-from app.retrieval.distance import features, top_matches
+from app.retrieval.distance import Ranked, top_matches
+from app.retrieval.feature_copy import FeatureCopy
 
 SCHEMA = (
     """CREATE TABLE IF NOT EXISTS shapes (
@@ -99,8 +99,8 @@ class SQLiteStore:
             connection.execute("PRAGMA journal_mode=WAL")
             for statement in SCHEMA:
                 connection.execute(statement)
-        with self._connect() as connection:  # read the features now, not in the first query (~5 s at 10⁶ rows)
-            self._copy.synced(connection)
+        with self._connect() as connection:  # read the features now, not in the first query (~3 s at 10⁶ rows)
+            self._copy.synced(_SQLiteRows(connection))
 
     @contextmanager
     def _connect(self) -> Iterator[sqlite3.Connection]:
@@ -168,7 +168,7 @@ class SQLiteStore:
     def nearest(self, spectra: np.ndarray, top: int) -> list[Match]:
         with self._connect() as connection:
             connection.execute("BEGIN")  # one snapshot: the copy's rows and the records read back
-            rowids, stored, squared = self._copy.synced(connection)
+            rowids, stored, squared = self._copy.synced(_SQLiteRows(connection))
             if len(rowids) == 0:
                 return []
             ranked = top_matches(np.asarray(spectra, dtype=np.float64), stored, squared, top)
@@ -176,58 +176,36 @@ class SQLiteStore:
             rows = connection.execute(
                 f"SELECT rowid, {COLUMNS} FROM shapes WHERE rowid IN ({','.join('?' * len(chosen))})", chosen
             ).fetchall()
-        by_rowid = {row[0]: row[1:] for row in rows}
-        return [
-            Match(_record(by_rowid[rowid]), float(distance), int(query))
-            for rowid, distance, query in zip(chosen, ranked.distances, ranked.queries, strict=True)
-        ]
+        return matches(ranked, rowids, {row[0]: _record(row[1:]) for row in rows})
 
 
-class FeatureCopy:
-    """The stored shapes' retrieval features in memory, in rowid order, kept in step with the file.
+class _SQLiteRows:
+    """The store's rows as one SQLite transaction sees them (:class:`FeatureCopy`'s source)."""
 
-    While no row is deleted, rows only ever arrive with a rowid above every rowid before them:
-    each query reads just the rows past the last one the copy has, and a query whose snapshot is
-    older than the copy (another thread read first) sees a prefix of it. A deletion (counted by
-    a trigger in the file, whichever process made it) or another file at the same path makes it
-    read everything again. Ranking is then what reading every row gave: the same features, in
-    the same order. Thread-safe: the service's k-NN requests share one store.
-    """
+    def __init__(self, connection: sqlite3.Connection) -> None:
+        self._connection = connection
 
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._version: tuple[str, int] | None = None  # (file, deletions) the copy was read at
-        self._rowids = np.zeros(0, dtype=np.int64)
-        self._features = np.zeros((0, 0))
-        self._squared = np.zeros(0)  # each row's squared norm, for top_matches
+    def version(self) -> tuple[str, int]:
+        return self._connection.execute("SELECT file, deletions FROM store_state WHERE id = 1").fetchone()
 
-    def synced(self, connection: sqlite3.Connection) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(rowids (m,), features (m, k - 1), their squared norms (m,)) of every stored shape, as
-        ``connection`` sees them."""
-        file, deletions = connection.execute("SELECT file, deletions FROM store_state WHERE id = 1").fetchone()
-        (last,) = connection.execute("SELECT COALESCE(MAX(rowid), 0) FROM shapes").fetchone()
-        with self._lock:
-            known = int(self._rowids[-1]) if len(self._rowids) else 0
-            if (file, deletions) != self._version:
-                self._version = (file, deletions)
-                self._rowids, self._features = _features_after(connection, 0)
-                self._squared = (self._features**2).sum(axis=1)
-            elif last > known:
-                rowids, features = _features_after(connection, known)
-                self._rowids = np.concatenate([self._rowids, rowids])
-                self._features = np.concatenate([self._features.reshape(-1, features.shape[1]), features])
-                self._squared = np.concatenate([self._squared, (features**2).sum(axis=1)])
-            end = int(np.searchsorted(self._rowids, last, side="right"))
-            return self._rowids[:end], self._features[:end], self._squared[:end]
+    def last(self) -> int:
+        return int(self._connection.execute("SELECT COALESCE(MAX(rowid), 0) FROM shapes").fetchone()[0])
+
+    def spectra_after(self, key: int) -> tuple[np.ndarray, np.ndarray]:
+        rows = self._connection.execute(
+            "SELECT rowid, spectrum FROM shapes WHERE rowid > ? ORDER BY rowid", (key,)
+        ).fetchall()
+        spectra = [np.frombuffer(row[1], dtype=np.float64) for row in rows]
+        return np.array([row[0] for row in rows], dtype=np.int64), np.stack(spectra) if spectra else np.zeros((0, 0))
 
 
-def _features_after(connection: sqlite3.Connection, rowid: int) -> tuple[np.ndarray, np.ndarray]:
-    """(rowids, features) of the stored shapes past ``rowid``, in rowid order."""
-    rows = connection.execute("SELECT rowid, spectrum FROM shapes WHERE rowid > ? ORDER BY rowid", (rowid,)).fetchall()
-    if not rows:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 0))
-    spectra = np.stack([np.frombuffer(row[1], dtype=np.float64) for row in rows])
-    return np.array([row[0] for row in rows], dtype=np.int64), features(spectra)
+def matches(ranked: Ranked, keys: np.ndarray, records: dict[int, ShapeRecord]) -> list[Match]:
+    """The ranking as :class:`Match` es, ``records`` the chosen rows' records by key."""
+    chosen = keys[ranked.rows].tolist()
+    return [
+        Match(records[key], float(distance), int(query))
+        for key, distance, query in zip(chosen, ranked.distances, ranked.queries, strict=True)
+    ]
 
 
 def _blob(spectrum: np.ndarray) -> bytes:
