@@ -1,22 +1,19 @@
-"""How retrieval cost grows with the database: SQLite's numpy scan against PostgreSQL's GiST index.
+"""How retrieval cost grows with the database, on SQLite and PostgreSQL.
 
 Run: ``python -m benchmarks.bench_retrieval`` (PostgreSQL's server binaries installed, as
 ``.ci/run`` installs them; a throw-away server is started in a temporary folder, or give
-``--postgres-url``). Each backend is filled, through the service's own store classes and in
-batches of ``--batch``, to each of ``--sizes`` rows of synthetic ShapeDNA spectra: the seed
-database's complete bodies (``models/shapes.npz``) each scaled as a body 5 % larger or smaller
-is (all eigenvalues by 1/s²) and perturbed per eigenvalue by 2 %, as other people of similar
-build would be. At each size it reports the insert rate of the last batches, the time to
-rebuild PostgreSQL's GiST index over every row, and the latency of ``nearest(query, 10)`` as
-the service calls it (a connection per call included) over perturbed stored spectra: p50 and
-p99 of as many queries as ``--budget`` seconds allow, up to ``--queries``; and of
-``nearest`` asked for a share profile's 11 spectra at once, as ``/v1/retrieve`` asks for two
-operands whose overlap is not told. PostgreSQL's plan is
-checked to use the index (``EXPLAIN ANALYZE``), and both backends must return the same
-distances for the same rows. "first ms" is the first query after a fill: SQLite's in-memory copy
-of the features reads the rows added since the last query then; "open s" is opening the filled
-SQLite file afresh, as a restarted service does, which reads every row's features once
-(``--backends sqlite`` alone skips the server).
+``--postgres-url``; ``--backends sqlite`` alone skips the server). Each backend is filled,
+through the service's own store classes and in batches of ``--batch``, to each of ``--sizes``
+rows of synthetic ShapeDNA spectra: the seed database's complete bodies (``models/shapes.npz``)
+each scaled as a body 5 % larger or smaller is (all eigenvalues by 1/s²) and perturbed per
+eigenvalue by 2 %, as other people of similar build would be. At each size it reports the insert
+rate of the last batches, "open s" (a fresh store on the filled database, as a restarted replica
+opens it: it reads every row's features once), "first ms" (the first query after the fill, when
+the store's in-memory copy reads the rows added since its last query), and the latency of
+``nearest(query, 10)`` as the service calls it over perturbed stored spectra: p50 and p99 of as
+many queries as ``--budget`` seconds allow, up to ``--queries``; and of ``nearest`` asked for a
+share profile's 11 spectra at once, as ``/v1/retrieve`` asks for two operands whose overlap is
+not told. Both backends must return the same distances for the same rows.
 """
 
 import argparse
@@ -25,10 +22,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-import psycopg
 
 from app.contract import PROFILE_SHARES
-from app.retrieval.distance import features
 from app.retrieval.postgres import PostgresStore
 from app.retrieval.seed import SEED_FILE
 from app.retrieval.store import ShapeStore, SQLiteStore
@@ -83,18 +78,9 @@ def percentile(values: list[float], q: float) -> float:
     return float(np.percentile(values, q)) if values else float("nan")
 
 
-def postgres_index(url: str, query: np.ndarray) -> tuple[float, bool]:
-    """(seconds to rebuild the GiST index, whether the k-NN plan uses it)."""
-    vector = [float(x) for x in features(query)[0]]
-    with psycopg.connect(url, autocommit=True) as connection:
-        started = time.perf_counter()
-        connection.execute("REINDEX INDEX shapes_features")
-        rebuild = time.perf_counter() - started
-        connection.execute("ANALYZE shapes")
-        plan = connection.execute(
-            "EXPLAIN ANALYZE SELECT id FROM shapes ORDER BY features <-> cube(%s::float8[]) LIMIT %s", (vector, TOP)
-        ).fetchall()
-    return rebuild, any("shapes_features" in row[0] for row in plan)
+def reopen(name: str, folder: Path, url: str | None) -> ShapeStore:
+    """A fresh store on the backend's database, as a restarted replica opens it."""
+    return SQLiteStore(folder / "shapes.db") if name == "SQLite" else PostgresStore(url)
 
 
 def main() -> None:
@@ -122,17 +108,14 @@ def main() -> None:
         server.start()
         url = server.url
     folder = Path(tempfile.mkdtemp(prefix="bench-retrieval-"))
-    stores: dict[str, ShapeStore] = {}
-    if "sqlite" in args.backends:
-        stores["SQLite"] = SQLiteStore(folder / "shapes.db")
-    if "postgresql" in args.backends:
-        stores["PostgreSQL"] = PostgresStore(url)
+    names = {"sqlite": "SQLite", "postgresql": "PostgreSQL"}
+    stores = {names[backend]: reopen(names[backend], folder, url) for backend in args.backends}
     profiles = np.stack([share_profile(query) for query in queries])
     print(
-        "| backend | rows | insert rows/s | GiST rebuild s | index used | open s | first ms | k-NN p50 ms | p99 ms "
+        "| backend | rows | insert rows/s | open s | first ms | k-NN p50 ms | p99 ms "
         f"| queries | share profile ({len(PROFILE_SHARES)} spectra) p50 ms | p99 ms | queries |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     try:
         filled = 0
         for size in sorted(args.sizes):
@@ -143,16 +126,11 @@ def main() -> None:
                 profiled = latencies(store, profiles, args.budget)
                 answers[name] = [m.distance for m in store.nearest(queries[0], TOP)]
                 answers[name] += [m.distance for m in store.nearest(profiles[0], TOP)]
-                rebuild, used, opened = "—", "—", "—"
-                if name == "SQLite":
-                    started = time.perf_counter()
-                    SQLiteStore(folder / "shapes.db")
-                    opened = f"{time.perf_counter() - started:.1f}"
-                if name == "PostgreSQL":
-                    seconds, uses = postgres_index(url, queries[0])
-                    rebuild, used = f"{seconds:.1f}", "yes" if uses else "NO"
+                started = time.perf_counter()
+                reopen(name, folder, url)
+                opened = time.perf_counter() - started
                 print(
-                    f"| {name} | {size:,} | {rate:,.0f} | {rebuild} | {used} | {opened} | {times[0]:.1f} "
+                    f"| {name} | {size:,} | {rate:,.0f} | {opened:.1f} | {times[0]:.1f} "
                     f"| {percentile(times, 50):.1f} | {percentile(times, 99):.1f} | {len(times)} "
                     f"| {percentile(profiled, 50):.1f} | {percentile(profiled, 99):.1f} | {len(profiled)} |",
                     flush=True,
