@@ -1,6 +1,6 @@
 """A throw-away PostgreSQL server for the tests: initdb in a temporary folder, a free port.
 
-No mocks: the cube extension, the GiST index and the k-NN operator are PostgreSQL's own.
+No mocks: transactions, snapshots, advisory locks and triggers are PostgreSQL's own.
 When the server binaries are missing (``.ci/run`` installs them) the PostgreSQL cases skip.
 """
 

@@ -209,7 +209,21 @@ class _PostgresRows:
         return int(self._connection.execute("SELECT COALESCE(MAX(seq), 0) FROM shapes").fetchone()[0])
 
     def spectra_after(self, key: int) -> tuple[np.ndarray, np.ndarray]:
-        query = "SELECT seq, spectrum FROM shapes WHERE seq > %s ORDER BY seq"
+        """Read in PostgreSQL's binary array format (``array_send``) and decoded by numpy: as
+        Python lists of floats, 10⁶ rows took 16 s."""
+        query = "SELECT seq, array_send(spectrum) FROM shapes WHERE seq > %s ORDER BY seq"
         rows = self._connection.execute(query, (key,)).fetchall()
         keys = np.array([row[0] for row in rows], dtype=np.int64)
-        return keys, np.array([row[1] for row in rows], dtype=np.float64) if rows else np.zeros((0, 0))
+        return keys, np.stack([_float8_array(row[1]) for row in rows]) if rows else np.zeros((0, 0))
+
+
+def _float8_array(data: bytes) -> np.ndarray:
+    """A one-dimensional float8[] in PostgreSQL's binary array format: a 20-byte header (number of
+    dimensions, null flag, element type, length, lower bound), then each element as a 4-byte
+    length and 8 big-endian bytes."""
+    (length,) = np.frombuffer(data, dtype=">i4", count=1, offset=12)
+    elements = np.frombuffer(data, dtype=_FLOAT8_ELEMENT, count=int(length), offset=20)
+    return elements["value"].astype(np.float64)
+
+
+_FLOAT8_ELEMENT = np.dtype([("length", ">i4"), ("value", ">f8")])
