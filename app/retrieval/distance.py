@@ -49,37 +49,32 @@ class Ranked(NamedTuple):
     queries: np.ndarray
 
 
-def top_matches(
-    queries: np.ndarray, stored: np.ndarray, squared: np.ndarray, top: int, coarse: np.ndarray | None = None
-) -> Ranked:
+def top_matches(queries: np.ndarray, stored: np.ndarray, squared: np.ndarray, top: int) -> Ranked:
     """The ``top`` rows of (m, k - 1) stored :func:`features` nearest to one (k,) or any of (n, k)
     query spectra, exactly as ``np.argsort(nearest_of(queries, spectra)[0], kind="stable")[:top]``
     orders them, with their distances and the query each is nearest to; ``squared``: each stored
-    row's squared norm; ``coarse``: the same features in float32, for the ranking pass.
+    row's squared norm.
 
     Why not :func:`nearest_of` and a sort: its differences take a pass over every stored row per
     query, and a stable sort of every distance took ~0.2 s at 10⁶ rows. Here one matrix product
-    ranks every row by |f|² − 2 f·q + |q|², which rounding (float32's with ``coarse``: half the
-    bytes to read, 5 against 11 ms at 10⁶ rows) moves by less than ``slack`` from the true
-    squared distance; only rows that rounding could have kept out of the top are then measured
-    by differences in float64 and sorted (distance, then row: the stable order). The products
+    ranks every row by |f|² − 2 f·q + |q|², which float64 rounding moves by less than ``slack``
+    from the true squared distance; only rows that rounding could have kept out of the top are
+    then measured by differences and sorted (distance, then row: the stable order). The products
     run on one BLAS thread: a block's is too small to share, and with both cores busy (the solver
     workers' work) OpenBLAS's two threads made a query over 10⁶ rows 115 ms instead of 15.
     """
     asked = features(queries)
-    ranking = stored if coarse is None else coarse
-    asked_ranked = asked.astype(ranking.dtype)
-    asked_squared = (asked_ranked**2).sum(axis=1)[:, None]
+    asked_squared = (asked**2).sum(axis=1)[:, None]
     approximate = np.empty(len(stored))
     with _BLAS.limit(limits=1, user_api="blas"):
         for start in range(0, len(stored), BLOCK_ROWS):  # (queries, block) temporaries, not (queries, rows)
             block = slice(start, start + BLOCK_ROWS)
-            approximate[block] = (asked_squared - 2 * (asked_ranked @ ranking[block].T)).min(axis=0)
+            approximate[block] = (asked_squared - 2 * (asked @ stored[block].T)).min(axis=0)
     approximate += squared
     candidates = np.arange(len(stored))
     if 0 < top < len(stored):
         # (|f| + |q|)² ≤ 2 (|f|² + |q|²) bounds every product's terms; 64 ulps of that, twice.
-        slack = 2 * 64 * np.finfo(ranking.dtype).eps * 2 * (squared.max() + float(asked_squared.max()))
+        slack = 2 * 64 * np.finfo(np.float64).eps * 2 * (squared.max() + asked_squared.max())
         # The top-th smallest of a sample of the rows is at least the top-th of all: a bound as
         # good for choosing candidates, at a fraction of a partition of every row.
         sample = approximate[:: max(1, len(stored) // max(SAMPLE_ROWS, top))]

@@ -8,7 +8,7 @@ what changed since their last query.
 
 import threading
 from collections.abc import Hashable
-from typing import NamedTuple, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -35,19 +35,8 @@ class RowSource(Protocol):
         ...
 
 
-class Copied(NamedTuple):
-    """Every stored shape's key (m,), features (m, k - 1), their squared norms (m,) and the
-    features in float32 (what :func:`app.retrieval.distance.top_matches` ranks with), key order."""
-
-    keys: np.ndarray
-    features: np.ndarray
-    squared: np.ndarray
-    coarse: np.ndarray
-
-
 class FeatureCopy:
-    """Keys, features (m, k - 1), their squared norms and a float32 copy of every stored shape,
-    in key order (~230 MB at 10⁶ shapes).
+    """Keys, features (m, k - 1) and their squared norms of every stored shape, in key order.
 
     Each query reads just the rows past the last key the copy has; one whose snapshot is older
     than the copy (another thread read first) sees a prefix of it; a changed version reads
@@ -61,10 +50,9 @@ class FeatureCopy:
         self._keys = np.zeros(0, dtype=np.int64)
         self._features = np.zeros((0, 0))
         self._squared = np.zeros(0)
-        self._coarse = np.zeros((0, 0), dtype=np.float32)
 
-    def synced(self, source: RowSource) -> Copied:
-        """Every stored shape as ``source``'s snapshot sees it."""
+    def synced(self, source: RowSource) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(keys (m,), features (m, k - 1), squared norms (m,)) as ``source``'s snapshot sees them."""
         version, last = source.version(), source.last()
         with self._lock:
             known = int(self._keys[-1]) if len(self._keys) else 0
@@ -72,16 +60,13 @@ class FeatureCopy:
                 self._version = version
                 self._keys, self._features = _features_after(source, 0)
                 self._squared = (self._features**2).sum(axis=1)
-                self._coarse = self._features.astype(np.float32)
             elif last > known:
                 keys, added = _features_after(source, known)
-                width = added.shape[1]
                 self._keys = np.concatenate([self._keys, keys])
-                self._features = np.concatenate([self._features.reshape(-1, width), added])
+                self._features = np.concatenate([self._features.reshape(-1, added.shape[1]), added])
                 self._squared = np.concatenate([self._squared, (added**2).sum(axis=1)])
-                self._coarse = np.concatenate([self._coarse.reshape(-1, width), added.astype(np.float32)])
             end = int(np.searchsorted(self._keys, last, side="right"))
-            return Copied(self._keys[:end], self._features[:end], self._squared[:end], self._coarse[:end])
+            return self._keys[:end], self._features[:end], self._squared[:end]
 
 
 def _features_after(source: RowSource, key: int) -> tuple[np.ndarray, np.ndarray]:

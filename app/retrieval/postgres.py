@@ -22,8 +22,9 @@ from datetime import UTC, datetime
 import numpy as np
 import psycopg
 
+from app.retrieval.distance import top_matches
 from app.retrieval.feature_copy import FeatureCopy
-from app.retrieval.store import Match, ShapeRecord, StoreUnavailable, matches, ranking
+from app.retrieval.store import Match, ShapeRecord, StoreUnavailable, matches
 
 SCHEMA = (
     """CREATE TABLE IF NOT EXISTS shapes (
@@ -183,14 +184,14 @@ class PostgresStore:
 
     def nearest(self, spectra: np.ndarray, top: int) -> list[Match]:
         with self._snapshot() as connection:
-            copied = self._copy.synced(_PostgresRows(connection))
-            if len(copied.keys) == 0:
+            keys, stored, squared = self._copy.synced(_PostgresRows(connection))
+            if len(keys) == 0:
                 return []
-            ranked = ranking(spectra, copied, top)
+            ranked = top_matches(np.asarray(spectra, dtype=np.float64), stored, squared, top)
             rows = connection.execute(
-                f"SELECT seq, {COLUMNS} FROM shapes WHERE seq = ANY(%s)", (copied.keys[ranked.rows].tolist(),)
+                f"SELECT seq, {COLUMNS} FROM shapes WHERE seq = ANY(%s)", (keys[ranked.rows].tolist(),)
             ).fetchall()
-        return matches(ranked, copied.keys, {r[0]: ShapeRecord(r[1], r[2], r[3], list(r[4]), r[5]) for r in rows})
+        return matches(ranked, keys, {r[0]: ShapeRecord(r[1], r[2], r[3], list(r[4]), r[5]) for r in rows})
 
 
 class _PostgresRows:

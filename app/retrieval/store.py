@@ -19,7 +19,7 @@ from typing import Protocol
 import numpy as np
 
 from app.retrieval.distance import Ranked, top_matches
-from app.retrieval.feature_copy import Copied, FeatureCopy
+from app.retrieval.feature_copy import FeatureCopy
 
 SCHEMA = (
     """CREATE TABLE IF NOT EXISTS shapes (
@@ -168,15 +168,15 @@ class SQLiteStore:
     def nearest(self, spectra: np.ndarray, top: int) -> list[Match]:
         with self._connect() as connection:
             connection.execute("BEGIN")  # one snapshot: the copy's rows and the records read back
-            copied = self._copy.synced(_SQLiteRows(connection))
-            if len(copied.keys) == 0:
+            rowids, stored, squared = self._copy.synced(_SQLiteRows(connection))
+            if len(rowids) == 0:
                 return []
-            ranked = ranking(spectra, copied, top)
-            chosen = copied.keys[ranked.rows].tolist()
+            ranked = top_matches(np.asarray(spectra, dtype=np.float64), stored, squared, top)
+            chosen = rowids[ranked.rows].tolist()
             rows = connection.execute(
                 f"SELECT rowid, {COLUMNS} FROM shapes WHERE rowid IN ({','.join('?' * len(chosen))})", chosen
             ).fetchall()
-        return matches(ranked, copied.keys, {row[0]: _record(row[1:]) for row in rows})
+        return matches(ranked, rowids, {row[0]: _record(row[1:]) for row in rows})
 
 
 class _SQLiteRows:
@@ -197,11 +197,6 @@ class _SQLiteRows:
         ).fetchall()
         spectra = [np.frombuffer(row[1], dtype=np.float64) for row in rows]
         return np.array([row[0] for row in rows], dtype=np.int64), np.stack(spectra) if spectra else np.zeros((0, 0))
-
-
-def ranking(spectra: np.ndarray, copied: Copied, top: int) -> Ranked:
-    """The ``top`` copied shapes nearest any of ``spectra``, exactly (:func:`top_matches`)."""
-    return top_matches(np.asarray(spectra, dtype=np.float64), copied.features, copied.squared, top, copied.coarse)
 
 
 def matches(ranked: Ranked, keys: np.ndarray, records: dict[int, ShapeRecord]) -> list[Match]:

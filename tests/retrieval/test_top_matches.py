@@ -8,30 +8,24 @@ from app.retrieval.distance import SAMPLE_ROWS, features, nearest_of, top_matche
 from tests.retrieval.test_stores import spectra
 
 
-def _ranked(asked: np.ndarray, stored: np.ndarray, top: int, coarse: bool):
-    stored_features = features(stored)
-    squared = (stored_features**2).sum(axis=1)
-    return top_matches(asked, stored_features, squared, top, stored_features.astype(np.float32) if coarse else None)
-
-
 def _stable_truth(queries: np.ndarray, stored: np.ndarray, top: int):
     distance, query = nearest_of(queries, stored)
     order = np.argsort(distance, kind="stable")[:top]
     return order, distance[order], query[order]
 
 
-@pytest.mark.parametrize("coarse", [False, True])  # ranked in float64, or in float32 then measured
 @pytest.mark.parametrize("scale", [1.0, 1e-6, 1e12])  # bodies in metres, a shape 1 µm across, 1e12 1/m²
 @pytest.mark.parametrize("queries", [1, 11])
 @pytest.mark.parametrize("top", [1, 10, 57, 500])
-def test_top_matches_is_the_stable_sort_of_every_exact_distance(coarse, scale, queries, top):
+def test_top_matches_is_the_stable_sort_of_every_exact_distance(scale, queries, top):
     rng = np.random.default_rng(int(queries * top))
     stored = spectra(300, 20) * scale
     stored = np.concatenate([stored, stored[:40], stored[rng.integers(300, size=20)] * 1.0000001])  # ties
     asked = np.concatenate([stored[[3, 150]], spectra(queries, 21) * scale])[:queries]  # exact matches
     if queries > 1:
         asked = asked * np.linspace(1.0, 0.7, queries)[:, None]
-    ranked = _ranked(asked, stored, top, coarse)
+    stored_features = features(stored)
+    ranked = top_matches(asked, stored_features, (stored_features**2).sum(axis=1), top)
     rows, distances, nearest = _stable_truth(asked, stored, top)
     np.testing.assert_array_equal(ranked.rows, rows)
     np.testing.assert_array_equal(ranked.distances, distances)
@@ -46,8 +40,7 @@ def test_a_stored_copy_of_the_query_is_at_distance_zero():
     assert ranked.rows[0] == 17 and ranked.distances[0] == 0.0
 
 
-@pytest.mark.parametrize("coarse", [False, True])
-def test_rows_nearer_than_rounding_are_still_ranked_exactly(coarse):
+def test_rows_nearer_than_rounding_are_still_ranked_exactly():
     """Thirty copies of one body, each moved by ~1e-14 of its eigenvalues, all nearest the query:
     the matrix product cannot order them (its rounding is ~1e-13 of the squared distance), the
     exact distances can; the top 10 must be theirs."""
@@ -55,16 +48,16 @@ def test_rows_nearer_than_rounding_are_still_ranked_exactly(coarse):
     body = spectra(1, 24)[0]
     copies = body * (1 + 1e-14 * rng.standard_normal((30, len(body))))
     stored = np.concatenate([spectra(200, 25) * 3, copies])
+    stored_features = features(stored)
     query = body * 1.02
-    ranked = _ranked(query, stored, 10, coarse)
+    ranked = top_matches(query, stored_features, (stored_features**2).sum(axis=1), 10)
     rows, distances, _ = _stable_truth(query, stored, 10)
     np.testing.assert_array_equal(ranked.rows, rows)
     np.testing.assert_array_equal(ranked.distances, distances)
 
 
-@pytest.mark.parametrize("coarse", [False, True])
 @pytest.mark.parametrize("queries", [1, 11])
-def test_a_store_larger_than_the_sample_is_ranked_exactly(queries, coarse):
+def test_a_store_larger_than_the_sample_is_ranked_exactly(queries):
     """Past SAMPLE_ROWS rows the candidates' bound comes from a sample: the answer is still the
     exact stable sort, near-ties included."""
     rng = np.random.default_rng(26)
@@ -72,8 +65,9 @@ def test_a_store_larger_than_the_sample_is_ranked_exactly(queries, coarse):
     copies = body * (1 + 1e-14 * rng.standard_normal((30, len(body))))
     stored = np.concatenate([spectra(5 * SAMPLE_ROWS, 28), copies, spectra(SAMPLE_ROWS, 29)])
     asked = (body * 1.02)[None] * np.linspace(1.0, 0.8, queries)[:, None]
+    stored_features = features(stored)
     for top in (1, 10, 25, 100):
-        ranked = _ranked(asked, stored, top, coarse)
+        ranked = top_matches(asked, stored_features, (stored_features**2).sum(axis=1), top)
         rows, distances, nearest = _stable_truth(asked, stored, top)
         np.testing.assert_array_equal(ranked.rows, rows)
         np.testing.assert_array_equal(ranked.distances, distances)
