@@ -200,7 +200,7 @@ class _SQLiteRows:
 
 
 def matches(ranked: Ranked, keys: np.ndarray, records: dict[int, ShapeRecord]) -> list[Match]:
-    """The ranking as :class:`Match` es, ``records`` the chosen rows' records by key."""
+    """The ranking as matches, ``records`` holding the chosen rows' records by key."""
     chosen = keys[ranked.rows].tolist()
     return [
         Match(records[key], float(distance), int(query))
