@@ -4,7 +4,7 @@ its answer must be, to the bit, the stable sort of every exact distance (``neare
 import numpy as np
 import pytest
 
-from app.retrieval.distance import SAMPLE_ROWS, features, nearest_of, top_matches
+from app.retrieval.distance import SAMPLE_ROWS, SINGLE_BLOCK_ROWS, features, nearest_of, top_matches
 from tests.retrieval.test_stores import spectra
 
 
@@ -72,3 +72,16 @@ def test_a_store_larger_than_the_sample_is_ranked_exactly(queries):
         np.testing.assert_array_equal(ranked.rows, rows)
         np.testing.assert_array_equal(ranked.distances, distances)
         np.testing.assert_array_equal(ranked.queries, nearest)
+
+
+@pytest.mark.parametrize("queries", [1, 3])
+def test_rows_past_one_block_are_all_ranked(queries):
+    """More rows than one block of either path holds: the last block's rows count like the first's."""
+    stored = spectra(SINGLE_BLOCK_ROWS + 1000, 30)
+    asked = stored[[-5, 10, -700][:queries]] * 1.001
+    stored_features = features(stored)
+    ranked = top_matches(asked, stored_features, (stored_features**2).sum(axis=1), 10)
+    rows, distances, nearest = _stable_truth(asked, stored, 10)
+    np.testing.assert_array_equal(ranked.rows, rows)
+    np.testing.assert_array_equal(ranked.distances, distances)
+    np.testing.assert_array_equal(ranked.queries, nearest)
