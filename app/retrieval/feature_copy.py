@@ -12,7 +12,7 @@ from typing import Protocol
 
 import numpy as np
 
-from app.retrieval.distance import features
+from app.retrieval.distance import Ranked, features, top_matches
 
 
 class RowSource(Protocol):
@@ -67,6 +67,15 @@ class FeatureCopy:
                 self._squared = np.concatenate([self._squared, (added**2).sum(axis=1)])
             end = int(np.searchsorted(self._keys, last, side="right"))
             return self._keys[:end], self._features[:end], self._squared[:end]
+
+    def nearest(self, source: RowSource, spectra: np.ndarray, top: int) -> Ranked:
+        """The ``top`` stored shapes nearest any of ``spectra`` as ``source``'s snapshot sees them
+        (:func:`top_matches`), each row given by its key in the database."""
+        keys, stored, squared = self.synced(source)
+        if len(keys) == 0:
+            return Ranked(keys, np.zeros(0), np.zeros(0, dtype=np.int64))
+        ranked = top_matches(np.asarray(spectra, dtype=np.float64), stored, squared, top)
+        return ranked._replace(rows=keys[ranked.rows])
 
 
 def _features_after(source: RowSource, key: int) -> tuple[np.ndarray, np.ndarray]:

@@ -22,7 +22,6 @@ from datetime import UTC, datetime
 import numpy as np
 import psycopg
 
-from app.retrieval.distance import top_matches
 from app.retrieval.feature_copy import FeatureCopy
 from app.retrieval.store import Match, ShapeRecord, StoreUnavailable, matches
 
@@ -184,14 +183,11 @@ class PostgresStore:
 
     def nearest(self, spectra: np.ndarray, top: int) -> list[Match]:
         with self._snapshot() as connection:
-            keys, stored, squared = self._copy.synced(_PostgresRows(connection))
-            if len(keys) == 0:
-                return []
-            ranked = top_matches(np.asarray(spectra, dtype=np.float64), stored, squared, top)
+            ranked = self._copy.nearest(_PostgresRows(connection), spectra, top)
             rows = connection.execute(
-                f"SELECT seq, {COLUMNS} FROM shapes WHERE seq = ANY(%s)", (keys[ranked.rows].tolist(),)
+                f"SELECT seq, {COLUMNS} FROM shapes WHERE seq = ANY(%s)", (ranked.rows.tolist(),)
             ).fetchall()
-        return matches(ranked, keys, {r[0]: ShapeRecord(r[1], r[2], r[3], list(r[4]), r[5]) for r in rows})
+        return matches(ranked, {r[0]: ShapeRecord(r[1], r[2], r[3], list(r[4]), r[5]) for r in rows})
 
 
 class _PostgresRows:

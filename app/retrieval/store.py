@@ -18,7 +18,7 @@ from typing import Protocol
 
 import numpy as np
 
-from app.retrieval.distance import Ranked, top_matches
+from app.retrieval.distance import Ranked
 from app.retrieval.feature_copy import FeatureCopy
 
 SCHEMA = (
@@ -168,15 +168,12 @@ class SQLiteStore:
     def nearest(self, spectra: np.ndarray, top: int) -> list[Match]:
         with self._connect() as connection:
             connection.execute("BEGIN")  # one snapshot: the copy's rows and the records read back
-            rowids, stored, squared = self._copy.synced(_SQLiteRows(connection))
-            if len(rowids) == 0:
-                return []
-            ranked = top_matches(np.asarray(spectra, dtype=np.float64), stored, squared, top)
-            chosen = rowids[ranked.rows].tolist()
+            ranked = self._copy.nearest(_SQLiteRows(connection), spectra, top)
+            chosen = ranked.rows.tolist()
             rows = connection.execute(
                 f"SELECT rowid, {COLUMNS} FROM shapes WHERE rowid IN ({','.join('?' * len(chosen))})", chosen
             ).fetchall()
-        return matches(ranked, rowids, {row[0]: _record(row[1:]) for row in rows})
+        return matches(ranked, {row[0]: _record(row[1:]) for row in rows})
 
 
 class _SQLiteRows:
@@ -199,12 +196,11 @@ class _SQLiteRows:
         return np.array([row[0] for row in rows], dtype=np.int64), np.stack(spectra) if spectra else np.zeros((0, 0))
 
 
-def matches(ranked: Ranked, keys: np.ndarray, records: dict[int, ShapeRecord]) -> list[Match]:
-    """The ranking as matches, ``records`` holding the chosen rows' records by key."""
-    chosen = keys[ranked.rows].tolist()
+def matches(ranked: Ranked, records: dict[int, ShapeRecord]) -> list[Match]:
+    """The ranking (rows given by key) as matches, ``records`` holding the ranked rows' records by key."""
     return [
         Match(records[key], float(distance), int(query))
-        for key, distance, query in zip(chosen, ranked.distances, ranked.queries, strict=True)
+        for key, distance, query in zip(ranked.rows.tolist(), ranked.distances, ranked.queries, strict=True)
     ]
 
 
