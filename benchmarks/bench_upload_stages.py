@@ -5,7 +5,8 @@ files: the README's sample scans, written by ``spectral-unions samples``). Print
 table of median milliseconds per file: parsing the bytes (``load_shape``), the checks and
 repairs (``prepare_mesh``: merging, repeated and degenerate faces, the largest component,
 pin-holes), the intrinsic-Delaunay Laplacian, the shifted LDLᵀ factorization and ARPACK's
-iteration, each stage timed in turn within every repeat (this VM's speed drifts over minutes).
+iteration: the stages of one solve timed together in each repeat, so a drift of this VM's speed
+moves them alike.
 """
 
 import argparse
