@@ -205,21 +205,28 @@ class _PostgresRows:
         return int(self._connection.execute("SELECT COALESCE(MAX(seq), 0) FROM shapes").fetchone()[0])
 
     def spectra_after(self, key: int) -> tuple[np.ndarray, np.ndarray]:
-        """Read in PostgreSQL's binary array format (``array_send``) and decoded by numpy: as
-        Python lists of floats, 10⁶ rows took 16 s."""
+        """Read in PostgreSQL's binary array format (``array_send``) and decoded by numpy at once:
+        as Python lists of floats, 10⁶ rows took 16 s; decoded row by row, 4 s."""
         query = "SELECT seq, array_send(spectrum) FROM shapes WHERE seq > %s ORDER BY seq"
         rows = self._connection.execute(query, (key,)).fetchall()
         keys = np.array([row[0] for row in rows], dtype=np.int64)
-        return keys, np.stack([_float8_array(row[1]) for row in rows]) if rows else np.zeros((0, 0))
+        return keys, _float8_arrays([row[1] for row in rows])
 
 
-def _float8_array(data: bytes) -> np.ndarray:
-    """A one-dimensional float8[] in PostgreSQL's binary array format: a 20-byte header (number of
-    dimensions, null flag, element type, length, lower bound), then each element as a 4-byte
-    length and 8 big-endian bytes."""
-    (length,) = np.frombuffer(data, dtype=">i4", count=1, offset=12)
-    elements = np.frombuffer(data, dtype=_FLOAT8_ELEMENT, count=int(length), offset=20)
-    return elements["value"].astype(np.float64)
+def _float8_arrays(arrays: list[bytes]) -> np.ndarray:
+    """(n, k) values of n one-dimensional float8[] of one length k (every stored spectrum has the
+    store's k) in PostgreSQL's binary array format: a 20-byte header (number of dimensions, null
+    flag, element type, length, lower bound), then each element as a 4-byte length and 8
+    big-endian bytes."""
+    if not arrays:
+        return np.zeros((0, 0))
+    (length,) = np.frombuffer(arrays[0], dtype=">i4", count=1, offset=12)
+    size = _HEADER_BYTES + int(length) * _FLOAT8_ELEMENT.itemsize
+    if any(len(array) != size for array in arrays):
+        raise ValueError("stored spectra differ in length")
+    raw = np.frombuffer(b"".join(arrays), dtype=np.uint8).reshape(len(arrays), size)
+    return np.ascontiguousarray(raw[:, _HEADER_BYTES:]).view(_FLOAT8_ELEMENT)["value"].astype(np.float64)
 
 
+_HEADER_BYTES = 20
 _FLOAT8_ELEMENT = np.dtype([("length", ">i4"), ("value", ">f8")])
