@@ -9,7 +9,9 @@ each scaled as a body 5 % larger or smaller is (all eigenvalues by 1/s²) and pe
 eigenvalue by 2 %, as other people of similar build would be. At each size it reports the insert
 rate of the last batches, "open s" (a fresh store on the filled database, as a restarted replica
 opens it: it reads every row's features once), "first ms" (the first query after the fill, when
-the store's in-memory copy reads the rows added since its last query), and the latency of
+the store's in-memory copy reads the rows added since its last query), "after a deletion ms" (the
+first query after one row of the fill, not the newest, was deleted: the copy reads the deletion
+log; that row stays deleted, so each size holds one row less per size before it), and the latency of
 ``nearest(query, 10)`` as the service calls it over perturbed stored spectra: p50 and p99 of as
 many queries as ``--budget`` seconds allow, up to ``--queries``; and of ``nearest`` asked for a
 share profile's 11 spectra at once, as ``/v1/retrieve`` asks for two operands whose overlap is
@@ -112,10 +114,10 @@ def main() -> None:
     stores = {names[backend]: reopen(names[backend], folder, url) for backend in args.backends}
     profiles = np.stack([share_profile(query) for query in queries])
     print(
-        "| backend | rows | insert rows/s | open s | first ms | k-NN p50 ms | p99 ms "
+        "| backend | rows | insert rows/s | open s | first ms | after a deletion ms | k-NN p50 ms | p99 ms "
         f"| queries | share profile ({len(PROFILE_SHARES)} spectra) p50 ms | p99 ms | queries |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     try:
         filled = 0
         for size in sorted(args.sizes):
@@ -127,11 +129,14 @@ def main() -> None:
                 profiled = latencies(store, profiles, args.budget)
                 answers[name] = [m.distance for m in store.nearest(queries[0], TOP)]
                 answers[name] += [m.distance for m in store.nearest(profiles[0], TOP)]
+                victim = store.nearest(rows[(filled + size) // 2], 1)[0].record  # a row of this fill, itself
+                store.delete(victim.id)
+                deleted = latencies(store, queries[:1], 0)[0]  # the copy reads the deletion
                 started = time.perf_counter()
                 reopen(name, folder, url)
                 opened = time.perf_counter() - started
                 print(
-                    f"| {name} | {size:,} | {rate:,.0f} | {opened:.1f} | {first:.1f} "
+                    f"| {name} | {size:,} | {rate:,.0f} | {opened:.1f} | {first:.1f} | {deleted:.1f} "
                     f"| {percentile(times, 50):.1f} | {percentile(times, 99):.1f} | {len(times)} "
                     f"| {percentile(profiled, 50):.1f} | {percentile(profiled, 99):.1f} | {len(profiled)} |",
                     flush=True,

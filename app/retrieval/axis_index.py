@@ -11,6 +11,8 @@ for bit): the slices are ranked by it, and the reach is widened by more than flo
 could move a position or a distance.
 """
 
+import copy
+
 import numpy as np
 
 from app.retrieval.distance import Ranked, features, top_matches
@@ -28,7 +30,9 @@ ROUNDING = 1e-9
 
 class AxisIndex:
     """Keys, features (m, k - 1), squared norms and positions of stored rows, sorted by their
-    position along the rows' principal axis. Immutable once built: readers share it unlocked."""
+    position along the rows' principal axis, and which rows are still stored (``alive``: a
+    deleted row stays in the arrays, unanswered, until the index is built again). Immutable once
+    built: readers share it unlocked, and :meth:`without` makes another."""
 
     def __init__(self, keys: np.ndarray, stored: np.ndarray, squared: np.ndarray) -> None:
         self.axis = principal_axis(stored)
@@ -37,35 +41,51 @@ class AxisIndex:
         self.keys, self.features, self.squared = keys[order], stored[order], squared[order]
         self.position = position[order]
         self.magnitude = float(np.sqrt(squared.max())) if len(squared) else 0.0
+        self.alive = np.ones(len(keys), dtype=bool)
+        self.dead = 0  # rows deleted since the index was built
 
     def __len__(self) -> int:
         return len(self.keys)
 
-    def nearest(self, queries: np.ndarray, top: int, last: int) -> Ranked:
-        """The ``top`` rows with keys ≤ ``last`` nearest any of one (k,) or (n, k) query spectra,
-        ranked as :func:`top_matches` ranks them over all such rows in key order; rows given by key."""
+    def without(self, keys: np.ndarray) -> "AxisIndex":
+        """This index with the rows of ``keys`` (any not in it ignored) no longer answered; the
+        arrays are shared, only the liveness is new."""
+        other = copy.copy(self)
+        other.alive = self.alive & ~np.isin(self.keys, keys)
+        other.dead = len(self) - int(np.count_nonzero(other.alive))
+        return other
+
+    def live(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(keys, features, squared norms) of the rows still stored, in the index's order."""
+        return self.keys[self.alive], self.features[self.alive], self.squared[self.alive]
+
+    def nearest(self, queries: np.ndarray, top: int, last: int, stale: np.ndarray | None = None) -> Ranked:
+        """The ``top`` rows still stored with keys ≤ ``last`` and not in ``stale`` nearest any of
+        one (k,) or (n, k) query spectra, ranked as :func:`top_matches` ranks them over all such
+        rows in key order; rows given by key."""
         if len(self) == 0:
             return merged([], top)
         asked = features(queries)
-        hidden = int((self.keys > last).sum())  # rows newer than the caller's snapshot
-        reach = self._reach(queries, asked, top, last)
+        answerable = self.alive if stale is None or len(stale) == 0 else self.alive & ~np.isin(self.keys, stale)
+        reach = self._reach(queries, asked, top, last, answerable)
         found = []
         for window in _windows(self.position, asked @ self.axis, reach):
             keys = self.keys[window]
+            answered = answerable[window] & (keys <= last)  # not deleted, not newer than the caller's snapshot
+            hidden = len(keys) - int(np.count_nonzero(answered))
             ranked = top_matches(queries, self.features[window], self.squared[window], top + hidden, ties=keys)
-            keys = keys[ranked.rows]
-            visible = keys <= last
-            found.append(Ranked(keys[visible], ranked.distances[visible], ranked.queries[visible]))
+            kept = answered[ranked.rows]
+            found.append(Ranked(keys[ranked.rows][kept], ranked.distances[kept], ranked.queries[kept]))
         return merged(found, top)
 
-    def _reach(self, queries: np.ndarray, asked: np.ndarray, top: int, last: int) -> float:
+    def _reach(self, queries: np.ndarray, asked: np.ndarray, top: int, last: int, answerable: np.ndarray) -> float:
         """How far along the axis a row in the top can lie from the nearest query: the
         ``top``-th distance among the queries' neighbours on the axis, widened past rounding;
         infinite where too few rows are known (every row is then ranked)."""
         centres = np.searchsorted(self.position, asked @ self.axis)
         span = max(top, NEIGHBOURS // len(centres))
         near = np.unique(np.concatenate([np.arange(max(0, c - span), min(len(self), c + span)) for c in centres]))
-        near = near[self.keys[near] <= last]
+        near = near[answerable[near] & (self.keys[near] <= last)]
         if not 0 < top <= len(near):
             return np.inf
         each = np.stack([np.linalg.norm(self.features[near] - query, axis=1) for query in asked])

@@ -25,6 +25,8 @@ import psycopg
 from app.retrieval.feature_copy import FeatureCopy
 from app.retrieval.store import Match, ShapeRecord, StoreUnavailable, matches
 
+SCHEMA_LOCK = 7436  # replicas starting together change the schema one at a time
+INSERT_LOCK = 7437  # every insert and deletion, so that rows and deletions become visible in order
 SCHEMA = (
     """CREATE TABLE IF NOT EXISTS shapes (
         id TEXT PRIMARY KEY,
@@ -37,15 +39,23 @@ SCHEMA = (
     "ALTER TABLE shapes DROP COLUMN IF EXISTS features",
     "ALTER TABLE shapes ADD COLUMN IF NOT EXISTS seq BIGSERIAL",
     "CREATE UNIQUE INDEX IF NOT EXISTS shapes_seq ON shapes (seq)",
+    # Deletions counted for replicas of the version before the log (a rolling upgrade shares one
+    # database); this version reads the log below.
     "CREATE TABLE IF NOT EXISTS store_state (id INTEGER PRIMARY KEY CHECK (id = 1), deletions BIGINT NOT NULL)",
     "INSERT INTO store_state (id, deletions) VALUES (1, 0) ON CONFLICT (id) DO NOTHING",
     """CREATE OR REPLACE FUNCTION count_shape_deletion() RETURNS trigger LANGUAGE plpgsql AS $$
         BEGIN UPDATE store_state SET deletions = deletions + 1 WHERE id = 1; RETURN NULL; END $$""",
     """CREATE OR REPLACE TRIGGER shapes_deleted AFTER DELETE ON shapes
         FOR EACH ROW EXECUTE FUNCTION count_shape_deletion()""",
+    # Which rows went, in the order their deletions become visible: a position is taken under
+    # the inserts' lock, held to the commit, so no later position is seen before an earlier one.
+    "CREATE TABLE IF NOT EXISTS deleted_shapes (position BIGSERIAL PRIMARY KEY, key BIGINT NOT NULL)",
+    f"""CREATE OR REPLACE FUNCTION log_shape_deletion() RETURNS trigger LANGUAGE plpgsql AS $$
+        BEGIN PERFORM pg_advisory_xact_lock({INSERT_LOCK});
+        INSERT INTO deleted_shapes (key) VALUES (OLD.seq); RETURN NULL; END $$""",
+    """CREATE OR REPLACE TRIGGER shapes_deletion_logged AFTER DELETE ON shapes
+        FOR EACH ROW EXECUTE FUNCTION log_shape_deletion()""",
 )
-SCHEMA_LOCK = 7436  # replicas starting together change the schema one at a time
-INSERT_LOCK = 7437  # every insert, so that rows become visible in seq order
 COLUMNS = "id, label, source, spectrum, created_at"
 CONNECT_TIMEOUT_SECONDS = 5
 IDLE_CONNECTIONS = 8  # kept open for reuse; more run at once when asked, and are closed after
@@ -197,9 +207,17 @@ class _PostgresRows:
         self._connection = connection
 
     def version(self) -> tuple[int, int]:
+        """The tables' identities: either made again (a restored backup) is other rows, another log."""
         return self._connection.execute(
-            "SELECT 'shapes'::regclass::oid::bigint, deletions FROM store_state WHERE id = 1"
+            "SELECT 'shapes'::regclass::oid::bigint, 'deleted_shapes'::regclass::oid::bigint"
         ).fetchone()
+
+    def deletions(self) -> int:
+        return int(self._connection.execute("SELECT COALESCE(MAX(position), 0) FROM deleted_shapes").fetchone()[0])
+
+    def deleted_after(self, position: int) -> np.ndarray:
+        rows = self._connection.execute("SELECT key FROM deleted_shapes WHERE position > %s", (position,)).fetchall()
+        return np.array([row[0] for row in rows], dtype=np.int64)
 
     def last(self) -> int:
         return int(self._connection.execute("SELECT COALESCE(MAX(seq), 0) FROM shapes").fetchone()[0])

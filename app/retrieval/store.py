@@ -30,8 +30,9 @@ SCHEMA = (
         created_at TEXT NOT NULL
     )""",
     # What an in-memory copy of the features needs to know it is the file's: which file this is
-    # (a random name given when the table is made: a restored backup is another file) and how
-    # many rows were ever deleted from it, counted in the file by whichever process deleted them.
+    # (a random name given when the table is made: a restored backup is another file) and which
+    # rows were deleted, logged in the file by whichever process deleted them (``deletions``
+    # counts them too, as processes of the version before the log read it).
     """CREATE TABLE IF NOT EXISTS store_state (
         id INTEGER PRIMARY KEY CHECK (id = 1),
         file TEXT NOT NULL,
@@ -40,6 +41,9 @@ SCHEMA = (
     "INSERT OR IGNORE INTO store_state (id, file, deletions) VALUES (1, lower(hex(randomblob(16))), 0)",
     """CREATE TRIGGER IF NOT EXISTS shapes_deleted AFTER DELETE ON shapes
         BEGIN UPDATE store_state SET deletions = deletions + 1 WHERE id = 1; END""",
+    "CREATE TABLE IF NOT EXISTS deleted_shapes (position INTEGER PRIMARY KEY, key INTEGER NOT NULL)",
+    """CREATE TRIGGER IF NOT EXISTS shapes_deletion_logged AFTER DELETE ON shapes
+        BEGIN INSERT INTO deleted_shapes (key) VALUES (OLD.rowid); END""",
 )
 COLUMNS = "id, label, source, spectrum, created_at"
 
@@ -182,8 +186,16 @@ class _SQLiteRows:
     def __init__(self, connection: sqlite3.Connection) -> None:
         self._connection = connection
 
-    def version(self) -> tuple[str, int]:
-        return self._connection.execute("SELECT file, deletions FROM store_state WHERE id = 1").fetchone()
+    def version(self) -> str:
+        return self._connection.execute("SELECT file FROM store_state WHERE id = 1").fetchone()[0]
+
+    def deletions(self) -> int:
+        """The log's positions count up from 1 and are never removed."""
+        return int(self._connection.execute("SELECT COALESCE(MAX(position), 0) FROM deleted_shapes").fetchone()[0])
+
+    def deleted_after(self, position: int) -> np.ndarray:
+        rows = self._connection.execute("SELECT key FROM deleted_shapes WHERE position > ?", (position,)).fetchall()
+        return np.array([row[0] for row in rows], dtype=np.int64)
 
     def last(self) -> int:
         return int(self._connection.execute("SELECT COALESCE(MAX(rowid), 0) FROM shapes").fetchone()[0])

@@ -55,7 +55,7 @@ def test_the_index_measures_a_minority_of_clustered_rows():
     measured = []
     for query in people(20, 4):
         asked = features(query)
-        reach = index._reach(query, asked, 10, len(stored))
+        reach = index._reach(query, asked, 10, len(stored), index.alive)
         measured.append(sum(w.stop - w.start for w in _windows(index.position, asked @ index.axis, reach)))
     assert np.median(measured) < 0.35 * len(stored)
 
@@ -86,37 +86,107 @@ def test_identical_rows_and_an_empty_index():
     assert len(empty.nearest(stored[0], 5, 10).rows) == 0
 
 
-class Rows:
-    """A RowSource over an array whose rows are added in batches (keys 1…n)."""
+class Table:
+    """Rows as SQLite keeps them (a new row's key one above the greatest stored, so the newest
+    row's key is given again once it is deleted), with a deletion log; ``snapshot()`` freezes
+    what one transaction sees, as a RowSource. Counts the full reads."""
 
-    def __init__(self, stored: np.ndarray) -> None:
-        self.stored, self.visible = stored, 0
+    def __init__(self) -> None:
+        self.rows: dict[int, np.ndarray] = {}
+        self.log: list[int] = []
+        self.full_reads = 0
+
+    def add(self, spectra: np.ndarray) -> None:
+        for spectrum in spectra:
+            self.rows[max(self.rows, default=0) + 1] = spectrum
+
+    def delete(self, key: int) -> None:
+        del self.rows[key]
+        self.log.append(key)
+
+    def snapshot(self) -> "Snapshot":
+        return Snapshot(self, dict(self.rows), list(self.log))
+
+
+class Snapshot:
+    def __init__(self, table: Table, rows: dict[int, np.ndarray], log: list[int]) -> None:
+        self.table, self.rows, self.log = table, rows, log
 
     def version(self) -> int:
         return 0
 
     def last(self) -> int:
-        return self.visible
+        return max(self.rows, default=0)
+
+    def deletions(self) -> int:
+        return len(self.log)
+
+    def deleted_after(self, position: int) -> np.ndarray:
+        return np.array(self.log[position:], dtype=np.int64)
 
     def spectra_after(self, key: int) -> tuple[np.ndarray, np.ndarray]:
-        return np.arange(key + 1, self.visible + 1), self.stored[key : self.visible]
+        self.table.full_reads += key == 0
+        keys = sorted(k for k in self.rows if k > key)
+        return np.array(keys, dtype=np.int64), np.array([self.rows[k] for k in keys]).reshape(len(keys), -1)
+
+    def truth(self, query: np.ndarray, top: int, rows: dict[int, np.ndarray] | None = None):
+        """(keys, distances, nearest query) of the top of ``rows`` (default: this snapshot's)."""
+        rows = self.rows if rows is None else rows
+        keys = np.array(sorted(rows), dtype=np.int64)
+        distance, nearest = nearest_of(query, np.array([rows[k] for k in keys]).reshape(len(keys), -1))
+        order = np.argsort(distance, kind="stable")[:top]
+        return keys[order], distance[order], nearest[order]
 
 
-def test_the_copy_ranks_exactly_while_rows_arrive_and_its_index_is_rebuilt(monkeypatch):
-    """Rows added past the index are scanned beside it until they are many, then indexed again;
-    answers at every step (and for a snapshot older than the copy) are the exact ones."""
+def test_the_copy_ranks_exactly_while_rows_arrive_and_go(monkeypatch):
+    """Rows added past the index are scanned beside it and deleted ones carried unanswered until
+    they are many, then indexed again; a deletion is read from the log, except the newest row's
+    (its key may come back): answers at every step are the exact ones, and for a snapshot older
+    than the copy's rows, a prefix of them."""
     monkeypatch.setattr(feature_copy, "TAIL_ROWS", 300)
-    stored = people(4_000, 8)
-    queries = people(6, 9)
-    copy, rows = FeatureCopy(), Rows(stored)
-    rebuilt = 0
-    for visible in (1, 2, 250, 700, 701, 1_500, 2_600, 4_000):
-        rows.visible = visible
-        before = len(copy._index)
-        for query in (queries[visible % 6], queries[:3]):
-            assert_ranked(copy.nearest(rows, query, 10), truth(query, stored, 10, visible))
-        rebuilt += len(copy._index) != before
-        old = Rows(stored)
-        old.visible = visible // 2  # another transaction's older snapshot
-        assert_ranked(copy.nearest(old, queries[0], 10), truth(queries[0], stored, 10, visible // 2))
-    assert rebuilt >= 2
+    pool, queries = people(6_000, 8), people(6, 9)
+    rng = np.random.default_rng(10)
+    table, copy = Table(), FeatureCopy()
+    table.add(pool[:1])
+    rebuilt = reloads = 0
+    for step in range(40):
+        before, reads = copy._index, table.full_reads
+        if step % 4 == 3:  # the newest row: SQLite gives its key to the next row
+            table.delete(max(table.rows))
+            reloads += 1
+        elif step % 4 == 2:
+            for key in rng.choice(sorted(table.rows)[:-1], size=min(len(table.rows) - 1, 40), replace=False):
+                table.delete(int(key))
+        table.add(pool[rng.integers(len(pool), size=int(rng.integers(1, 400)))])
+        seen = table.snapshot()
+        for query in (queries[step % 6], queries[:3]):
+            assert_ranked(copy.nearest(seen, query, 10), seen.truth(query, 10))
+        assert table.full_reads - reads == (step % 4 == 3 or step == 0), step  # the log, not a re-read
+        rebuilt += copy._index is not before and len(copy._index) != len(before)
+        older = Snapshot(table, {k: v for k, v in seen.rows.items() if k <= seen.last() // 2}, seen.log)
+        assert_ranked(copy.nearest(older, queries[0], 10), older.truth(queries[0], 10))
+    assert rebuilt >= 3 and reloads == 10
+
+
+def test_a_snapshot_older_than_a_deletion_is_not_answered_the_deleted_rows():
+    """A query that took its snapshot before a deletion another query applied first: the rows it
+    sees less the deleted ones, and never a row whose key SQLite gave again."""
+    table, copy = Table(), FeatureCopy()
+    table.add(people(500, 11))
+    query = table.rows[250] * 1.001
+    copy.nearest(table.snapshot(), query, 5)
+    old = table.snapshot()
+    for key in (250, 251, 17):
+        table.delete(key)
+    newest = max(table.rows)
+    table.add(people(3, 12))  # keys above the newest: nothing given again yet
+    copy.nearest(table.snapshot(), query, 5)
+    expected = {k: v for k, v in old.rows.items() if k in table.rows}
+    assert_ranked(copy.nearest(old, query, 10), old.truth(query, 10, expected))
+    # The newest row deleted and its key given again: the copy reads everything; a snapshot older
+    # than that is read whole (the copy no longer knows what went before it).
+    table.delete(max(table.rows))
+    table.add(people(1, 13) * 0 + query)  # the query itself, under a key the old snapshot knows otherwise
+    copy.nearest(table.snapshot(), query, 5)
+    assert_ranked(copy.nearest(old, query, 10), old.truth(query, 10))
+    assert newest < max(table.rows)
