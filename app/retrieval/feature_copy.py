@@ -38,11 +38,11 @@ class RowSource(Protocol):
         ...
 
     def deletions(self) -> int:
-        """How many deletions the log holds (0: none ever)."""
+        """The log's last position (0: no deletion ever); positions grow, with gaps at times."""
         ...
 
-    def deleted_after(self, position: int) -> np.ndarray:
-        """The keys of the rows deleted past ``position`` in the log."""
+    def deleted_after(self, position: int) -> tuple[np.ndarray, np.ndarray]:
+        """(positions, keys) of the deletions logged past ``position``."""
         ...
 
     def last(self) -> int:
@@ -87,9 +87,11 @@ class FeatureCopy:
         self._lock = threading.Lock()
         self._version: Hashable | None = None
         self._known = 0  # the greatest key read, a row still stored
-        self._deletions = 0  # deletions of the log applied
-        self._log = np.zeros(0, dtype=np.int64)  # the keys of the log's deletions since the last full read …
-        self._log_start = 0  # … which had read this many
+        self._deletions = 0  # the log's last position applied
+        # The log's deletions applied since the last full read (which had read the log up to
+        # _log_start): positions and keys.
+        self._log_start = 0
+        self._log_positions = self._log_keys = np.zeros(0, dtype=np.int64)
         self._index = AxisIndex(*_empty())
         self._keys, self._features, self._squared = _empty()
 
@@ -98,11 +100,11 @@ class FeatureCopy:
         version, last, deletions = source.version(), source.last(), source.deletions()
         with self._lock:
             if version == self._version and deletions > self._deletions:
-                deleted = source.deleted_after(self._deletions)
+                positions, deleted = source.deleted_after(self._deletions)
                 if self._known in deleted:
                     self._version = None
                 else:
-                    self._forget(deleted)
+                    self._forget(positions, deleted)
                 self._deletions = deletions
             if version != self._version:
                 self._version = version
@@ -110,7 +112,7 @@ class FeatureCopy:
                 self._keys, self._features, self._squared = _empty()
                 self._known = int(self._index.keys.max()) if len(self._index) else 0
                 self._deletions = self._log_start = deletions
-                self._log = np.zeros(0, dtype=np.int64)
+                self._log_positions = self._log_keys = np.zeros(0, dtype=np.int64)
             elif deletions == self._deletions and last > self._known:  # an older snapshot adds nothing
                 keys, added, squared = _features_after(source, self._known)
                 self._keys = np.concatenate([self._keys, keys])
@@ -120,7 +122,7 @@ class FeatureCopy:
             if len(self._keys) + self._index.dead > max(TAIL_ROWS, TAIL_SHARE * len(self._index)):
                 self._reindex()
             if deletions >= self._log_start:
-                stale = self._log[deletions - self._log_start :]
+                stale = self._log_keys[self._log_positions > deletions]
                 kept = (self._keys <= last) & ~np.isin(self._keys, stale)
                 return Snapshot(self._index, self._keys[kept], self._features[kept], self._squared[kept], last, stale)
         return Snapshot(AxisIndex(*_features_after(source, 0)), *_empty(), last, np.zeros(0, dtype=np.int64))
@@ -136,9 +138,11 @@ class FeatureCopy:
             found.append(ranked._replace(rows=seen.keys[ranked.rows]))
         return merged(found, top)
 
-    def _forget(self, deleted: np.ndarray) -> None:
-        """Rows of ``deleted`` keys no longer answered (keys the copy never read are ignored)."""
-        self._log = np.concatenate([self._log, deleted])
+    def _forget(self, positions: np.ndarray, deleted: np.ndarray) -> None:
+        """Rows of ``deleted`` keys (logged at ``positions``) no longer answered; keys the copy
+        never read are ignored."""
+        self._log_positions = np.concatenate([self._log_positions, positions])
+        self._log_keys = np.concatenate([self._log_keys, deleted])
         self._index = self._index.without(deleted)
         kept = ~np.isin(self._keys, deleted)
         self._keys, self._features, self._squared = self._keys[kept], self._features[kept], self._squared[kept]

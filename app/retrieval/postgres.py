@@ -23,7 +23,7 @@ import numpy as np
 import psycopg
 
 from app.retrieval.feature_copy import FeatureCopy
-from app.retrieval.store import Match, ShapeRecord, StoreUnavailable, matches
+from app.retrieval.store import Match, ShapeRecord, StoreUnavailable, matches, positions_and_keys
 
 SCHEMA_LOCK = 7436  # replicas starting together change the schema one at a time
 INSERT_LOCK = 7437  # every insert and deletion, so that rows and deletions become visible in order
@@ -215,9 +215,9 @@ class _PostgresRows:
     def deletions(self) -> int:
         return int(self._connection.execute("SELECT COALESCE(MAX(position), 0) FROM deleted_shapes").fetchone()[0])
 
-    def deleted_after(self, position: int) -> np.ndarray:
-        rows = self._connection.execute("SELECT key FROM deleted_shapes WHERE position > %s", (position,)).fetchall()
-        return np.array([row[0] for row in rows], dtype=np.int64)
+    def deleted_after(self, position: int) -> tuple[np.ndarray, np.ndarray]:
+        query = "SELECT position, key FROM deleted_shapes WHERE position > %s"
+        return positions_and_keys(self._connection.execute(query, (position,)).fetchall())
 
     def last(self) -> int:
         return int(self._connection.execute("SELECT COALESCE(MAX(seq), 0) FROM shapes").fetchone()[0])

@@ -190,12 +190,11 @@ class _SQLiteRows:
         return self._connection.execute("SELECT file FROM store_state WHERE id = 1").fetchone()[0]
 
     def deletions(self) -> int:
-        """The log's positions count up from 1 and are never removed."""
         return int(self._connection.execute("SELECT COALESCE(MAX(position), 0) FROM deleted_shapes").fetchone()[0])
 
-    def deleted_after(self, position: int) -> np.ndarray:
-        rows = self._connection.execute("SELECT key FROM deleted_shapes WHERE position > ?", (position,)).fetchall()
-        return np.array([row[0] for row in rows], dtype=np.int64)
+    def deleted_after(self, position: int) -> tuple[np.ndarray, np.ndarray]:
+        query = "SELECT position, key FROM deleted_shapes WHERE position > ?"
+        return positions_and_keys(self._connection.execute(query, (position,)).fetchall())
 
     def last(self) -> int:
         return int(self._connection.execute("SELECT COALESCE(MAX(rowid), 0) FROM shapes").fetchone()[0])
@@ -214,6 +213,12 @@ def matches(ranked: Ranked, records: dict[int, ShapeRecord]) -> list[Match]:
         Match(records[key], float(distance), int(query))
         for key, distance, query in zip(ranked.rows.tolist(), ranked.distances, ranked.queries, strict=True)
     ]
+
+
+def positions_and_keys(rows: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
+    """The deletion log's (position, key) rows as two arrays."""
+    logged = np.array(rows, dtype=np.int64).reshape(-1, 2)
+    return logged[:, 0], logged[:, 1]
 
 
 def _blob(spectrum: np.ndarray) -> bytes:

@@ -119,10 +119,11 @@ class Snapshot:
         return max(self.rows, default=0)
 
     def deletions(self) -> int:
-        return len(self.log)
+        return 3 * len(self.log)
 
-    def deleted_after(self, position: int) -> np.ndarray:
-        return np.array(self.log[position:], dtype=np.int64)
+    def deleted_after(self, position: int) -> tuple[np.ndarray, np.ndarray]:
+        """Positions with gaps, as a rolled-back PostgreSQL deletion leaves them (3 per entry)."""
+        return 3 * np.arange(position // 3 + 1, len(self.log) + 1), np.array(self.log[position // 3 :], dtype=np.int64)
 
     def spectra_after(self, key: int) -> tuple[np.ndarray, np.ndarray]:
         self.table.full_reads += key == 0
