@@ -6,7 +6,7 @@ import pytest
 
 @pytest.fixture
 def fresh_postgres(postgres_url):
-    """The server with no shapes table: each test starts from an empty database."""
+    """The server with no shapes or deletion log: each test starts from an empty database."""
     with psycopg.connect(postgres_url, autocommit=True) as connection:
-        connection.execute("DROP TABLE IF EXISTS shapes")
+        connection.execute("DROP TABLE IF EXISTS shapes, deleted_shapes")
     return postgres_url

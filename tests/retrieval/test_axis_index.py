@@ -4,6 +4,8 @@ snapshot sees, and the copy that keeps it must stay so while rows are added."""
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from app.retrieval import feature_copy
 from app.retrieval.axis_index import AxisIndex, _windows
@@ -77,6 +79,35 @@ def test_rows_past_the_snapshot_are_not_answered(last):
     stored = people(3_000, 6)
     query = stored[-1] * 1.001  # the newest row is the nearest
     assert_ranked(index_of(stored).nearest(query, 10, last), truth(query, stored, 10, last))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    rows=st.integers(1, 400),
+    top=st.integers(1, 60),
+    queries=st.integers(1, 4),
+    deleted=st.floats(0, 0.9),
+    last=st.floats(0, 1),
+)
+def test_any_index_with_deletions_ranks_as_every_row_it_answers(seed, rows, top, queries, deleted, last):
+    """Whatever the rows (some repeated, some at one point), the deleted ones, the snapshot's last
+    key and the stale keys: the answer is the stable ranking of exactly the rows it may answer."""
+    rng = np.random.default_rng(seed)
+    stored = people(rows, seed % 1000)
+    stored[rng.random(rows) < 0.1] = stored[0]  # repeated rows: ties on the axis and in distance
+    gone = np.flatnonzero(rng.random(rows) < deleted) + 1
+    stale = rng.choice(np.arange(1, rows + 1), size=min(rows, int(rng.integers(0, 3))), replace=False)
+    seen = int(round(last * rows))
+    index = index_of(stored).without(gone)
+    asked = people(1, seed % 997) * np.linspace(1.0, 0.8, queries)[:, None]
+    answerable = [k for k in range(1, seen + 1) if k not in set(gone) | set(stale)]
+    expected_rows = {k: stored[k - 1] for k in answerable}
+    keys = np.array(sorted(expected_rows), dtype=np.int64)
+    spectra_ = np.array([expected_rows[k] for k in keys]).reshape(len(keys), stored.shape[1])
+    distance, nearest = nearest_of(asked, spectra_) if len(keys) else (np.zeros(0), np.zeros(0, dtype=np.int64))
+    order = np.argsort(distance, kind="stable")[:top]
+    assert_ranked(index.nearest(asked, top, seen, stale), (keys[order], distance[order], nearest[order]))
 
 
 def test_identical_rows_and_an_empty_index():

@@ -148,11 +148,11 @@ def test_a_database_replaced_by_a_smaller_one_is_read_again(database, tmp_path):
     assert [m.record.label for m in store.nearest(query, 3)] == database.truth(query, 3)
 
 
-def test_threads_ranking_while_another_inserts_all_get_the_database_s_answer(database):
-    """The service's k-NN requests share one store from several threads while uploads add shapes:
-    rows added far from the queries (three times the scale) never change their answer, so every
-    answer, whatever snapshot its thread read, must be the one computed before; a worker's
-    exception surfaces through its future."""
+def test_threads_ranking_while_another_inserts_and_deletes_all_get_the_database_s_answer(database):
+    """The service's k-NN requests share one store from several threads while uploads add shapes
+    and others are deleted: rows added far from the queries (three times the scale), and deleted
+    again (at times the newest), never change their answer, so every answer, whatever snapshot its
+    thread read, must be the one computed before; a worker's exception surfaces through its future."""
     store, writer = database.store(), database.store()
     near = spectra(300, 12)
     store.add_many([f"near-{i}" for i in range(300)], near, "test")
@@ -165,9 +165,33 @@ def test_threads_ranking_while_another_inserts_all_get_the_database_s_answer(dat
 
     with ThreadPoolExecutor(max_workers=4) as pool:
         answers = [pool.submit(rank, i) for i in range(12)]
+        added = []
         for i, spectrum in enumerate(far):
-            writer.add(f"far-{i}", spectrum, "test")
+            added.append(writer.add(f"far-{i}", spectrum, "test").id)
+            if i % 3 == 2:  # the one before, or (every other time) the newest
+                assert writer.delete(added.pop(-1 if i % 6 == 5 else -2))
         for i, answer in enumerate(answers):
             assert answer.result(timeout=60) == expected[i % 2 :: 2]
-    assert store.count() == 450
+    assert store.count() == 400
     assert [m.record.label for m in store.nearest(far[7] * 1.01, 3)] == database.truth(far[7] * 1.01, 3)
+
+
+def test_a_deletion_rolled_back_leaves_a_gap_in_the_log_and_nothing_else(fresh_postgres):
+    """A deletion that rolls back consumes its log position: the copy must still see the
+    deletions after it, and never the one that did not happen."""
+    database = Database("postgresql", fresh_postgres)
+    store = database.store()
+    stored = spectra(40, 15)
+    store.add_many([f"person-{i}" for i in range(40)], stored, "test")
+    query = stored[8] * 1.01
+    assert store.nearest(query, 1)[0].record.label == "person-8"
+    ids = {label: i for i, label, _ in database.rows()}
+    with psycopg.connect(fresh_postgres) as connection:
+        connection.execute("DELETE FROM shapes WHERE id = %s", (ids["person-8"],))
+        connection.rollback()
+    assert store.nearest(query, 1)[0].record.label == "person-8"
+    assert store.delete(ids["person-9"]) and store.delete(ids["person-3"])
+    assert [m.record.label for m in store.nearest(query, 6)] == database.truth(query, 6)
+    with psycopg.connect(fresh_postgres) as connection:
+        positions = [row[0] for row in connection.execute("SELECT position FROM deleted_shapes ORDER BY position")]
+    assert positions == [2, 3]  # position 1 went to the deletion rolled back
