@@ -5,7 +5,7 @@ Why: a position on a unit axis u never moves more than the distance does, |u·f 
 so once some ``top`` rows are known within a distance ``bound`` of the query, a row further than
 ``bound`` along the axis cannot rank among the top. People spread most along one direction of
 the log-spectrum (size: every log-eigenvalue moves together), so the rows within reach of one
-query are a small slice of the sorted rows: at 10⁶ stored bodies a query measured ~1/6 of them.
+query are a small slice of the sorted rows: at 10⁶ stored bodies a query measures ~1/10 of them.
 The answer is the exact ranking :func:`top_matches` gives over every row (its stable order, bit
 for bit): the slices are ranked by it, and the reach is widened by more than float64 rounding
 could move a position or a distance.
