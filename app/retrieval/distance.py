@@ -19,7 +19,7 @@ BLOCK_ROWS = 1 << 12
 SINGLE_BLOCK_ROWS = 1 << 16  # one query: a matrix-vector product per block (10.4 ms over 10⁶ rows)
 # Rows sampled for top_matches' bound: ~top / SAMPLE_ROWS of all rows are then measured exactly.
 SAMPLE_ROWS = 4096
-_BLAS = ThreadpoolController()
+BLAS = ThreadpoolController()  # products on one BLAS thread (top_matches says why)
 
 
 def features(spectra: np.ndarray) -> np.ndarray:
@@ -70,7 +70,7 @@ def top_matches(
     asked = features(queries)
     asked_squared = (asked**2).sum(axis=1)[:, None]
     approximate = np.empty(len(stored))
-    with _BLAS.limit(limits=1, user_api="blas"):
+    with BLAS.limit(limits=1, user_api="blas"):
         if len(asked) == 1:  # one matrix-vector product per block, no minimum to take
             for start in range(0, len(stored), SINGLE_BLOCK_ROWS):
                 block = slice(start, start + SINGLE_BLOCK_ROWS)
@@ -84,14 +84,27 @@ def top_matches(
     if not 0 < top < len(stored):
         candidates = np.arange(len(stored))
     else:
-        # (|f| + |q|)² ≤ 2 (|f|² + |q|²) bounds every product's terms; 64 ulps of that, twice.
-        slack = 2 * 64 * np.finfo(np.float64).eps * 2 * (squared.max() + asked_squared.max())
+        slack = rounding_slack(squared.max(), asked_squared.max())
         # The top-th smallest of a sample of the rows is at least the top-th of all: a bound as
         # good for choosing candidates, at a fraction of a partition of every row.
         sample = approximate[:: max(1, len(stored) // max(SAMPLE_ROWS, top))]
         bound = np.partition(sample, top - 1)[top - 1] if len(sample) >= top else approximate.max()
         candidates = np.flatnonzero(approximate <= bound + slack)
-    each = np.stack([np.linalg.norm(stored[candidates] - query, axis=1) for query in asked])
+    return ranked_exactly(asked, stored, candidates, candidates if ties is None else ties[candidates], top)
+
+
+def rounding_slack(stored_squared: float, asked_squared: float) -> float:
+    """How far float64 rounding can move |f|² − 2 f·q + |q|² from the true squared distance, for
+    rows of squared norm ≤ ``stored_squared`` and a query of ``asked_squared``: (|f| + |q|)² ≤
+    2 (|f|² + |q|²) bounds every term of the product; 64 ulps of that, twice."""
+    return 2 * 64 * np.finfo(np.float64).eps * 2 * (stored_squared + asked_squared)
+
+
+def ranked_exactly(asked: np.ndarray, stored: np.ndarray, rows: np.ndarray, ties: np.ndarray, top: int) -> Ranked:
+    """The ``top`` of ``rows`` of (m, k - 1) stored features by their distance to the nearest of the
+    (n, k - 1) ``asked`` features, measured by differences as :func:`nearest_of` measures every
+    row, ties ordered by ``ties`` (one per row of ``rows``)."""
+    each = np.stack([np.linalg.norm(stored[rows] - query, axis=1) for query in asked])
     distance, query = each.min(axis=0), each.argmin(axis=0)
-    order = np.lexsort((candidates if ties is None else ties[candidates], distance))[:top]
-    return Ranked(candidates[order], distance[order], query[order])
+    order = np.lexsort((ties, distance))[:top]
+    return Ranked(rows[order], distance[order], query[order])
