@@ -7,8 +7,8 @@ so once some ``top`` rows are known within a distance ``bound`` of the query, a 
 the log-spectrum (size: every log-eigenvalue moves together), so the rows within reach of one
 query are a small slice of the sorted rows: at 10⁶ stored bodies a query measures ~1/10 of them.
 The answer is the exact ranking :func:`top_matches` gives over every row (its stable order, bit
-for bit): the slices are ranked by it, and the reach is widened by more than float64 rounding
-could move a position or a distance.
+for bit): the rows kept are measured by differences, and the reach is widened by more than
+float64 rounding could move a position, a distance or a product.
 """
 
 import copy
