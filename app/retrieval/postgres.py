@@ -5,8 +5,8 @@ k-NN is ranked in each replica from an in-memory copy of the stored features
 this store used before pruned poorly (p99 52 ms at 10⁶ shapes, 408 ms for a share profile). The
 copy reads the rows past the last ``seq`` it has, so every insert takes one advisory lock first:
 rows then become visible in ``seq`` order, which a reader's snapshot can trust; deletions are
-counted by a trigger, and the table's oid tells a recreated table. Schema changes are made on
-start-up (the earlier ``features`` column and its index are dropped).
+logged by a trigger under the same lock, and the tables' oids tell recreated ones. Schema changes
+are made on start-up (the earlier ``features`` column and its index are dropped).
 
 Connections are reused (:class:`IdleConnections`): opening one costs ~10 ms on loopback, as
 much as a k-NN over 10⁵ shapes. Each operation takes an idle connection or opens one, runs as
@@ -23,7 +23,7 @@ import numpy as np
 import psycopg
 
 from app.retrieval.feature_copy import FeatureCopy
-from app.retrieval.store import Match, ShapeRecord, StoreUnavailable, matches, positions_and_keys
+from app.retrieval.store import DeletionLog, Match, ShapeRecord, StoreUnavailable, matches
 
 SCHEMA_LOCK = 7436  # replicas starting together change the schema one at a time
 INSERT_LOCK = 7437  # every insert and deletion, so that rows and deletions become visible in order
@@ -200,24 +200,16 @@ class PostgresStore:
         return matches(ranked, {r[0]: ShapeRecord(r[1], r[2], r[3], list(r[4]), r[5]) for r in rows})
 
 
-class _PostgresRows:
+class _PostgresRows(DeletionLog):
     """The store's rows as one repeatable-read transaction sees them (:class:`FeatureCopy`'s source)."""
 
-    def __init__(self, connection: psycopg.Connection) -> None:
-        self._connection = connection
+    PLACEHOLDER = "%s"
 
     def version(self) -> tuple[int, int]:
         """The tables' identities: either made again (a restored backup) is other rows, another log."""
         return self._connection.execute(
             "SELECT 'shapes'::regclass::oid::bigint, 'deleted_shapes'::regclass::oid::bigint"
         ).fetchone()
-
-    def deletions(self) -> int:
-        return int(self._connection.execute("SELECT COALESCE(MAX(position), 0) FROM deleted_shapes").fetchone()[0])
-
-    def deleted_after(self, position: int) -> tuple[np.ndarray, np.ndarray]:
-        query = "SELECT position, key FROM deleted_shapes WHERE position > %s"
-        return positions_and_keys(self._connection.execute(query, (position,)).fetchall())
 
     def last(self) -> int:
         return int(self._connection.execute("SELECT COALESCE(MAX(seq), 0) FROM shapes").fetchone()[0])

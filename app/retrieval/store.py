@@ -2,9 +2,9 @@
 
 SQLite is the embedded default: WAL so readers never block the writer, ``synchronous=FULL`` so
 an acknowledged write survives a crash, one short-lived connection per operation so threads
-and processes share the file safely. k-NN is exact and brute force in numpy, over an in-memory
-copy of the stored features (:mod:`app.retrieval.feature_copy`), which reads from the file only
-the rows added since the last query.
+and processes share the file safely. k-NN is exact, in numpy, over an in-memory copy of the
+stored features (:mod:`app.retrieval.feature_copy`), which reads from the file only the rows
+added and the deletions logged since the last query.
 """
 
 import sqlite3
@@ -14,7 +14,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -180,21 +180,35 @@ class SQLiteStore:
         return matches(ranked, {row[0]: _record(row[1:]) for row in rows})
 
 
-class _SQLiteRows:
-    """The store's rows as one SQLite transaction sees them (:class:`FeatureCopy`'s source)."""
+class Connection(Protocol):
+    """What a source reads through: SQLite's and psycopg's connections alike."""
 
-    def __init__(self, connection: sqlite3.Connection) -> None:
+    def execute(self, query: str, parameters: tuple = ..., /) -> Any: ...
+
+
+class DeletionLog:
+    """Reading a store's ``deleted_shapes`` log (both stores keep it, filled by a trigger) through
+    the connection of one snapshot: the two :class:`FeatureCopy` sources' shared part."""
+
+    PLACEHOLDER = "?"  # the driver's parameter marker
+
+    def __init__(self, connection: Connection) -> None:
         self._connection = connection
-
-    def version(self) -> str:
-        return self._connection.execute("SELECT file FROM store_state WHERE id = 1").fetchone()[0]
 
     def deletions(self) -> int:
         return int(self._connection.execute("SELECT COALESCE(MAX(position), 0) FROM deleted_shapes").fetchone()[0])
 
     def deleted_after(self, position: int) -> tuple[np.ndarray, np.ndarray]:
-        query = "SELECT position, key FROM deleted_shapes WHERE position > ?"
-        return positions_and_keys(self._connection.execute(query, (position,)).fetchall())
+        query = f"SELECT position, key FROM deleted_shapes WHERE position > {self.PLACEHOLDER}"
+        logged = np.array(self._connection.execute(query, (position,)).fetchall(), dtype=np.int64).reshape(-1, 2)
+        return logged[:, 0], logged[:, 1]
+
+
+class _SQLiteRows(DeletionLog):
+    """The store's rows as one SQLite transaction sees them (:class:`FeatureCopy`'s source)."""
+
+    def version(self) -> str:
+        return self._connection.execute("SELECT file FROM store_state WHERE id = 1").fetchone()[0]
 
     def last(self) -> int:
         return int(self._connection.execute("SELECT COALESCE(MAX(rowid), 0) FROM shapes").fetchone()[0])
@@ -220,12 +234,6 @@ def matches(ranked: Ranked, records: dict[int, ShapeRecord]) -> list[Match]:
         Match(records[key], float(distance), int(query))
         for key, distance, query in zip(ranked.rows.tolist(), ranked.distances, ranked.queries, strict=True)
     ]
-
-
-def positions_and_keys(rows: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
-    """The deletion log's (position, key) rows as two arrays."""
-    logged = np.array(rows, dtype=np.int64).reshape(-1, 2)
-    return logged[:, 0], logged[:, 1]
 
 
 def _blob(spectrum: np.ndarray) -> bytes:
