@@ -41,7 +41,6 @@ class AxisIndex:
         self.keys, self.features, self.squared = keys[order], stored[order], squared[order]
         self.position = position[order]
         self.squared_max = float(squared.max()) if len(squared) else 0.0
-        self.magnitude = float(np.sqrt(self.squared_max))
         self.alive = np.ones(len(keys), dtype=bool)
         self.dead = 0  # rows deleted since the index was built
 
@@ -105,7 +104,7 @@ class AxisIndex:
             return np.inf
         each = np.stack([np.linalg.norm(self.features[near] - query, axis=1) for query in asked])
         bound = np.partition(each.min(axis=0), top - 1)[top - 1]
-        largest = max(self.magnitude, float(np.abs(asked).sum(axis=1).max()))
+        largest = max(np.sqrt(self.squared_max), float(np.abs(asked).sum(axis=1).max()))
         return bound * (1 + ROUNDING) + ROUNDING * largest
 
 
