@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from app.geometry.topology import row_sums
+
 # An edge is flipped while cot α + cot β < -2e-6: geometry-central (inside robust-laplacian)
 # flips when its cotangent weight (cot α + cot β) / 2 is below its default -1e-6. Matching it
 # matters where four vertices are co-circular: either diagonal gives the same stiffness, but
@@ -52,7 +54,7 @@ def intrinsic_delaunay_operators(
     """
     edge_vectors = vertices[np.roll(faces, -1, axis=1)] - vertices[faces]
     lengths = np.sqrt(np.einsum("fij,fij->fi", edge_vectors, edge_vectors))
-    slack = lengths.sum(axis=1, keepdims=True) - 2 * lengths
+    slack = row_sums(lengths)[:, None] - 2 * lengths
     if slack.min() <= 2 * mollify_factor * lengths.mean():
         return None
     triangulation = _half_edge_mesh(faces, lengths.reshape(-1))
@@ -112,14 +114,14 @@ def _cotangents(t: _Triangulation, faces: np.ndarray) -> np.ndarray:
 def _cotangents_and_areas(t: _Triangulation, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     lengths, area = _face_geometry(t, faces)
     squared = lengths**2
-    return (squared.sum(axis=1, keepdims=True) - 2 * squared) / (4 * area[:, None]), area
+    return (row_sums(squared)[:, None] - 2 * squared) / (4 * area[:, None]), area
 
 
 def _cotangent_opposite(t: _Triangulation, half: np.ndarray) -> np.ndarray:
     """cot of the angle facing each half-edge in its face (only that one of the face's three)."""
     lengths, area = _face_geometry(t, half // 3)
     squared = lengths**2
-    return (squared.sum(axis=1) - 2 * squared[np.arange(len(half)), half % 3]) / (4 * area)
+    return (row_sums(squared) - 2 * squared[np.arange(len(half)), half % 3]) / (4 * area)
 
 
 def _flip_to_delaunay(t: _Triangulation) -> bool:
@@ -140,9 +142,17 @@ def _flip_to_delaunay(t: _Triangulation) -> bool:
         _flip(t, flipped)
         around = (3 * touched[:, None] + np.arange(3)).reshape(-1)
         pending = np.concatenate([around, bad[~chosen]])
-        candidates = np.unique(np.minimum(pending, t.twin[pending]))
+        candidates = _distinct(np.minimum(pending, t.twin[pending]), len(t.twin))
         weight = _cotangent_opposite(t, candidates) + _cotangent_opposite(t, t.twin[candidates])
     return False
+
+
+def _distinct(half: np.ndarray, count: int) -> np.ndarray:
+    """``np.unique`` of half-edge indices below ``count``, by marking them: a pass over every
+    half-edge costs less than hashing and sorting the few of a round (5 → 0.6 ms a body)."""
+    marked = np.zeros(count, dtype=bool)
+    marked[half] = True
+    return np.flatnonzero(marked)
 
 
 def _independent(edges: np.ndarray, twin: np.ndarray) -> np.ndarray:

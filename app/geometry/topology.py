@@ -5,10 +5,26 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 
+def row_sums(rows: np.ndarray) -> np.ndarray:
+    """(m,) the sum of each row of an (m, 3) array, added left to right as ``sum(axis=1)`` adds
+    them (the same bits), column by column: NumPy reduces a short axis one row at a time, ~15×
+    slower on a mesh's (m, 3) arrays (0.77 ms against 0.04 for 49 k rows)."""
+    return rows[:, 0] + rows[:, 1] + rows[:, 2]
+
+
 def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area of each triangle, (m,), in the squared units of ``vertices``."""
+    """Area of each triangle, (m,), in the squared units of ``vertices``: half the norm of the
+    cross product of two edges, computed column by column (see :func:`row_sums`)."""
     a, b, c = (vertices[faces[:, i]] for i in range(3))
-    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    u, v = b - a, c - a
+    cross = np.column_stack(
+        [
+            u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1],
+            u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2],
+            u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0],
+        ]
+    )
+    return 0.5 * np.sqrt(row_sums(cross * cross))
 
 
 def half_edges(faces: np.ndarray) -> np.ndarray:
@@ -18,7 +34,7 @@ def half_edges(faces: np.ndarray) -> np.ndarray:
 
 def edge_face_counts(half: np.ndarray) -> np.ndarray:
     """For each half-edge, how many faces share its undirected edge (1 = boundary)."""
-    low, high = half.min(axis=1), half.max(axis=1)
+    low, high = np.minimum(half[:, 0], half[:, 1]), np.maximum(half[:, 0], half[:, 1])
     # A sparse matrix with a one per half-edge at (low, high) sums them per edge on its way to
     # CSR (a bucket pass by row, then a sort within each short row); each half-edge then reads
     # its edge's sum back. A global argsort of one key per edge took 2-3x longer.

@@ -23,6 +23,7 @@ from app.geometry.topology import (
     half_edges,
     largest_component,
     referenced,
+    row_sums,
     vertices_of,
 )
 
@@ -37,6 +38,10 @@ CLUSTER_GAP = 10.0
 # A shape smaller than this is no scan of a body part. At this size λ_200 is ~1e12 1/m², far
 # inside MAX_EIGENVALUE, so a spectrum the service solves is always one its models can take.
 MIN_EXTENT_M = 1e-4
+# Weights of no simple ratio (e, π, the golden ratio): distinct scanned vertices, which sit on
+# grids and planes of symmetry, share a weighted sum of their coordinates only by a rounding
+# coincidence, which costs nothing but the exact sort (see _merge_duplicate_vertices).
+_GENERIC = (2.718281828459045, 3.141592653589793, 1.618033988749895)
 
 
 @dataclass(frozen=True)
@@ -188,12 +193,18 @@ def _merge_duplicate_vertices(vertices: np.ndarray, faces: np.ndarray) -> tuple[
     """Merge vertices with identical coordinates (STL stores every triangle on its own); also
     returns, per kept vertex, the index of the uploaded vertex it stands for.
 
-    A lexicographic sort finds the duplicates; a mesh without any (the usual case) comes back
-    as it was, in its own vertex order, without paying for np.unique over rows (5x slower).
+    A mesh without any (the usual case) comes back as it was, in its own vertex order: shown by
+    one generic combination of the coordinates, which identical vertices share, taking as many
+    values as there are vertices (a sort of one column, 4x faster than the lexicographic sort of
+    all three that finds the duplicates otherwise, itself 5x faster than np.unique over rows).
     """
+    combined = np.sort(vertices[:, 0] * _GENERIC[0] + vertices[:, 1] * _GENERIC[1] + vertices[:, 2] * _GENERIC[2])
+    if not (combined[1:] == combined[:-1]).any():
+        return vertices, faces, np.arange(len(vertices))
     order = np.lexsort(vertices.T[::-1])
     ordered = vertices[order]
-    repeats = np.r_[False, np.all(ordered[1:] == ordered[:-1], axis=1)]
+    same = ordered[1:] == ordered[:-1]
+    repeats = np.r_[False, same[:, 0] & same[:, 1] & same[:, 2]]
     if not repeats.any():
         return vertices, faces, np.arange(len(vertices))
     label = np.empty(len(vertices), dtype=np.int64)
@@ -219,7 +230,9 @@ def _distinct_faces(faces: np.ndarray) -> np.ndarray:
     """
     if len(faces) < 2:
         return faces
-    ordered = np.sort(faces, axis=1)
+    low = np.minimum(np.minimum(faces[:, 0], faces[:, 1]), faces[:, 2])
+    high = np.maximum(np.maximum(faces[:, 0], faces[:, 1]), faces[:, 2])
+    ordered = np.column_stack([low, row_sums(faces) - low - high, high])  # each row sorted
     n = int(ordered.max()) + 1
     if n**3 < 2**63:  # one int64 key per triangle: a sort instead of np.unique over rows (5x slower)
         keys = (ordered[:, 0] * n + ordered[:, 1]) * n + ordered[:, 2]
@@ -233,7 +246,7 @@ def _distinct_faces(faces: np.ndarray) -> np.ndarray:
 
 
 def _extent(points: np.ndarray) -> float:
-    return float(np.ptp(points, axis=0).max())
+    return max(float(column.max() - column.min()) for column in points.T)  # by column: see row_sums
 
 
 def _require_room_for(k: int, free_vertices: int) -> None:

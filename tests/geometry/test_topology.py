@@ -6,8 +6,16 @@ import numpy as np
 import pytest
 import trimesh
 
-from app.geometry.topology import drop_unreferenced, edge_face_counts, half_edges, largest_component
-from app.geometry.validate import _merge_duplicate_vertices
+from app.geometry.intrinsic import _distinct
+from app.geometry.topology import (
+    drop_unreferenced,
+    edge_face_counts,
+    face_areas,
+    half_edges,
+    largest_component,
+    row_sums,
+)
+from app.geometry.validate import _GENERIC, _distinct_faces, _merge_duplicate_vertices
 
 
 def _random_faces(rng: np.random.Generator, vertices: int, faces: int) -> np.ndarray:
@@ -70,3 +78,47 @@ def test_largest_component_is_by_area_and_one_component_is_returned_whole():
     np.testing.assert_array_equal(kept, big.faces + len(small.vertices))
     alone, none_dropped = largest_component(big.vertices, big.faces)
     assert none_dropped == 0 and alone is big.faces
+
+
+def test_row_sums_are_numpys_to_the_bit():
+    """Column by column, in the order NumPy's reduction adds, over magnitudes that round."""
+    rows = np.random.default_rng(0).standard_normal((1000, 3)) * 10.0 ** np.random.default_rng(1).integers(
+        -8, 8, (1000, 3)
+    )
+    assert np.array_equal(row_sums(rows), rows.sum(axis=1))
+
+
+def test_face_areas_are_half_the_cross_products_norm():
+    rng = np.random.default_rng(2)
+    vertices, faces = rng.standard_normal((50, 3)), _random_faces(rng, 50, 80)
+    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
+    assert np.array_equal(face_areas(vertices, faces), 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1))
+    right = face_areas(np.array([[0.0, 0, 0], [3, 0, 0], [0, 4, 0]]), np.array([[0, 1, 2]]))
+    assert right[0] == 6.0  # legs 3 and 4
+
+
+def test_distinct_vertices_sharing_a_weighted_sum_are_not_merged():
+    """(0, 0, 0) and (π, −e, 0) have the same weighted sum exactly (π·e − e·π): the exact sort
+    decides, keeps both, and still merges the true duplicate."""
+    assert _GENERIC[:2] == (np.e, np.pi)
+    vertices = np.array([[0.0, 0, 0], [np.pi, -np.e, 0], [0, 0, 1], [1, 0, 0], [0, 0, 1]])
+    faces = np.array([[0, 1, 2], [0, 3, 1], [1, 3, 4]])
+    merged, merged_faces, sources = _merge_duplicate_vertices(vertices, faces)
+    assert len(merged) == 4 and sorted(sources.tolist()) == [0, 1, 2, 3]
+    np.testing.assert_array_equal(merged[merged_faces], vertices[faces])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_distinct_faces_keep_the_first_of_each_triangle_in_any_vertex_order(seed):
+    rng = np.random.default_rng(seed)
+    faces = _random_faces(rng, 8, 60)  # few vertices: many repeats, in every rotation and orientation
+    kept = _distinct_faces(faces)
+    first = {}
+    for face in faces.tolist():
+        first.setdefault(frozenset(face), face)
+    assert kept.tolist() == list(first.values())
+
+
+def test_distinct_half_edges_are_numpys_unique():
+    half = np.random.default_rng(3).integers(0, 500, 300)
+    np.testing.assert_array_equal(_distinct(half, 500), np.unique(half))
