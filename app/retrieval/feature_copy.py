@@ -22,6 +22,10 @@ from app.retrieval.distance import Ranked, features, top_matches
 # rows added or deleted there).
 TAIL_ROWS = 1 << 14
 TAIL_SHARE = 1 / 16
+# The deletions the database's log keeps (a few MB), and so each copy's: a copy that last read
+# the log before the oldest of them reads every row again (an open: ~3 s at 10⁶ rows) instead of
+# the deletions since; a query whose snapshot is older reads its snapshot whole.
+DELETIONS_KEPT = 100_000
 
 
 class RowSource(Protocol):
@@ -43,6 +47,11 @@ class RowSource(Protocol):
 
     def deleted_after(self, position: int) -> tuple[np.ndarray, np.ndarray]:
         """(positions, keys) of the deletions logged past ``position``."""
+        ...
+
+    def forgotten(self) -> int:
+        """The position through which the log may have been pruned: a copy that last read it
+        before that cannot tell what was deleted since, and reads every row again."""
         ...
 
     def last(self) -> int:
@@ -73,11 +82,12 @@ class FeatureCopy:
 
     Each query reads just the rows past the last key the copy has and the deletions logged since
     its last read (a deleted row stops being answered; the index drops them when it is built
-    again). A changed version, or the deletion of the newest row (SQLite may give its key to the
-    next row), reads everything again. A query whose snapshot is older than the copy (another
-    thread read first) sees the copy's rows up to its last key, less those deleted since its
-    snapshot: rows it would still see are not answered once another query saw them deleted;
-    older than every deletion the copy remembers, it reads its snapshot whole. Ranking is then
+    again). A changed version, the deletion of the newest row (SQLite may give its key to the
+    next row), or a log pruned past the copy's last read, reads everything again. A query whose
+    snapshot is older than the copy (another thread read first) sees the copy's rows up to its
+    last key, less those deleted since its snapshot: rows it would still see are not answered
+    once another query saw them deleted; older than every deletion the copy remembers (at most
+    :data:`DELETIONS_KEPT`), it reads its snapshot whole. Ranking is then
     what reading every row gave: the same features, the same order. Thread-safe: the service's
     k-NN requests share one store; arrays are replaced, never changed, so a query ranks outside
     the lock.
@@ -89,7 +99,7 @@ class FeatureCopy:
         self._known = 0  # the greatest key read, a row still stored
         self._deletions = 0  # the log's last position applied
         # The log's deletions applied since the last full read (which had read the log up to
-        # _log_start): positions and keys.
+        # _log_start; or since the last of them forgotten, past DELETIONS_KEPT): positions and keys.
         self._log_start = 0
         self._log_positions = self._log_keys = np.zeros(0, dtype=np.int64)
         self._index = AxisIndex(*_empty())
@@ -101,7 +111,7 @@ class FeatureCopy:
         with self._lock:
             if version == self._version and deletions > self._deletions:
                 positions, deleted = source.deleted_after(self._deletions)
-                if self._known in deleted:
+                if self._known in deleted or self._deletions < source.forgotten():
                     self._version = None
                 else:
                     self._forget(positions, deleted)
@@ -141,8 +151,12 @@ class FeatureCopy:
     def _forget(self, positions: np.ndarray, deleted: np.ndarray) -> None:
         """Rows of ``deleted`` keys (logged at ``positions``) no longer answered; keys the copy
         never read are ignored."""
-        self._log_positions = np.concatenate([self._log_positions, positions])
-        self._log_keys = np.concatenate([self._log_keys, deleted])
+        positions = np.concatenate([self._log_positions, positions])
+        keys = np.concatenate([self._log_keys, deleted])
+        if len(positions) > DELETIONS_KEPT:  # forgotten as the database forgets them
+            self._log_start = int(positions[-DELETIONS_KEPT - 1])
+            positions, keys = positions[-DELETIONS_KEPT:], keys[-DELETIONS_KEPT:]
+        self._log_positions, self._log_keys = positions, keys
         self._index = self._index.without(deleted)
         kept = ~np.isin(self._keys, deleted)
         self._keys, self._features, self._squared = self._keys[kept], self._features[kept], self._squared[kept]

@@ -189,7 +189,10 @@ class PostgresStore:
 
     def delete(self, shape_id: str) -> bool:
         with self._connect() as connection:
-            return connection.execute("DELETE FROM shapes WHERE id = %s", (shape_id,)).rowcount > 0
+            deleted = connection.execute("DELETE FROM shapes WHERE id = %s", (shape_id,)).rowcount > 0
+            if deleted:
+                _PostgresRows(connection).prune()  # under the lock the deletion's trigger took
+        return deleted
 
     def nearest(self, spectra: np.ndarray, top: int) -> list[Match]:
         with self._snapshot() as connection:

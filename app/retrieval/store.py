@@ -19,7 +19,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from app.retrieval.distance import Ranked
-from app.retrieval.feature_copy import FeatureCopy
+from app.retrieval.feature_copy import DELETIONS_KEPT, FeatureCopy
 
 SCHEMA = (
     """CREATE TABLE IF NOT EXISTS shapes (
@@ -167,7 +167,10 @@ class SQLiteStore:
 
     def delete(self, shape_id: str) -> bool:
         with self._connect() as connection:
-            return connection.execute("DELETE FROM shapes WHERE id = ?", (shape_id,)).rowcount > 0
+            deleted = connection.execute("DELETE FROM shapes WHERE id = ?", (shape_id,)).rowcount > 0
+            if deleted:
+                DeletionLog(connection).prune()
+        return deleted
 
     def nearest(self, spectra: np.ndarray, top: int) -> list[Match]:
         with self._connect() as connection:
@@ -187,8 +190,9 @@ class Connection(Protocol):
 
 
 class DeletionLog:
-    """Reading a store's ``deleted_shapes`` log (both stores keep it, filled by a trigger) through
-    the connection of one snapshot: the two :class:`FeatureCopy` sources' shared part."""
+    """A store's ``deleted_shapes`` log (both stores keep it, filled by a trigger) through one
+    connection: read in one snapshot by the two :class:`FeatureCopy` sources, pruned by the
+    stores' deletions to the last :data:`DELETIONS_KEPT`."""
 
     PLACEHOLDER = "?"  # the driver's parameter marker
 
@@ -197,6 +201,19 @@ class DeletionLog:
 
     def deletions(self) -> int:
         return int(self._connection.execute("SELECT COALESCE(MAX(position), 0) FROM deleted_shapes").fetchone()[0])
+
+    def forgotten(self) -> int:
+        """The position through which the log may have been pruned (0: nothing pruned)."""
+        return int(self._connection.execute("SELECT COALESCE(MIN(position), 1) - 1 FROM deleted_shapes").fetchone()[0])
+
+    def prune(self) -> None:
+        """Forget all but the last :data:`DELETIONS_KEPT` deletions: an index range, nothing at
+        all until the log holds more. Run in the deleting transaction, after its deletion."""
+        self._connection.execute(
+            "DELETE FROM deleted_shapes WHERE position <= "
+            f"(SELECT MAX(position) FROM deleted_shapes) - {self.PLACEHOLDER}",
+            (DELETIONS_KEPT,),
+        )
 
     def deleted_after(self, position: int) -> tuple[np.ndarray, np.ndarray]:
         query = f"SELECT position, key FROM deleted_shapes WHERE position > {self.PLACEHOLDER}"

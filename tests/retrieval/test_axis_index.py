@@ -121,11 +121,13 @@ def test_identical_rows_and_an_empty_index():
 class Table:
     """Rows as SQLite keeps them (a new row's key one above the greatest stored, so the newest
     row's key is given again once it is deleted), with a deletion log; ``snapshot()`` freezes
-    what one transaction sees, as a RowSource. Counts the full reads."""
+    what one transaction sees, as a RowSource. Counts the full reads. ``prune`` forgets all but
+    the last deletions of the log, as the stores do."""
 
     def __init__(self) -> None:
         self.rows: dict[int, np.ndarray] = {}
         self.log: list[int] = []
+        self.pruned = 0  # entries of the log forgotten, from the front
         self.full_reads = 0
 
     def add(self, spectra: np.ndarray) -> None:
@@ -136,13 +138,16 @@ class Table:
         del self.rows[key]
         self.log.append(key)
 
+    def prune(self, kept: int) -> None:
+        self.pruned = max(self.pruned, len(self.log) - kept)
+
     def snapshot(self) -> "Snapshot":
-        return Snapshot(self, dict(self.rows), list(self.log))
+        return Snapshot(self, dict(self.rows), list(self.log), self.pruned)
 
 
 class Snapshot:
-    def __init__(self, table: Table, rows: dict[int, np.ndarray], log: list[int]) -> None:
-        self.table, self.rows, self.log = table, rows, log
+    def __init__(self, table: Table, rows: dict[int, np.ndarray], log: list[int], pruned: int = 0) -> None:
+        self.table, self.rows, self.log, self.pruned = table, rows, log, pruned
 
     def version(self) -> int:
         return 0
@@ -154,8 +159,14 @@ class Snapshot:
         return 3 * len(self.log)
 
     def deleted_after(self, position: int) -> tuple[np.ndarray, np.ndarray]:
-        """Positions with gaps, as a rolled-back PostgreSQL deletion leaves them (3 per entry)."""
-        return 3 * np.arange(position // 3 + 1, len(self.log) + 1), np.array(self.log[position // 3 :], dtype=np.int64)
+        """Positions with gaps, as a rolled-back PostgreSQL deletion leaves them (3 per entry);
+        the pruned entries are gone."""
+        first = max(position // 3, self.pruned)
+        return 3 * np.arange(first + 1, len(self.log) + 1), np.array(self.log[first:], dtype=np.int64)
+
+    def forgotten(self) -> int:
+        """The oldest kept entry's position less one (the gap before it counts as forgotten)."""
+        return 3 * (self.pruned + 1) - 1 if self.pruned else 0
 
     def spectra_after(self, key: int) -> tuple[np.ndarray, np.ndarray]:
         self.table.full_reads += key == 0
@@ -223,3 +234,37 @@ def test_a_snapshot_older_than_a_deletion_is_not_answered_the_deleted_rows():
     copy.nearest(table.snapshot(), query, 5)
     assert_ranked(copy.nearest(old, query, 10), old.truth(query, 10))
     assert newest < max(table.rows)
+
+
+def test_a_log_pruned_past_the_copy_s_last_read_is_not_trusted(monkeypatch):
+    """Deletions within what the log keeps are read from it; a copy that last read the log before
+    its oldest kept deletion reads every row again; answers exact either way. The copy's own log
+    keeps as many: a snapshot older than the deletions it forgot is read whole."""
+    monkeypatch.setattr(feature_copy, "DELETIONS_KEPT", 4)
+    table, copy = Table(), FeatureCopy()
+    table.add(people(400, 15))
+    query = table.rows[200] * 1.001
+    near = [int(key) for key in table.snapshot().truth(query, 15)[0] if key != max(table.rows)]
+    copy.nearest(table.snapshot(), query, 5)
+    reads = table.full_reads
+    for key in near[:3]:  # the query's nearest rows, one query between deletions
+        table.delete(key)
+        table.prune(4)
+        seen = table.snapshot()
+        assert_ranked(copy.nearest(seen, query, 10), seen.truth(query, 10))
+    assert table.full_reads == reads  # read from the log
+    for key in near[3:9]:  # more than the log keeps, no query between
+        table.delete(key)
+    table.prune(4)
+    seen = table.snapshot()
+    assert_ranked(copy.nearest(seen, query, 10), seen.truth(query, 10))
+    assert table.full_reads == reads + 1  # the log no longer held what the copy had not read
+    older = table.snapshot()
+    for key in near[9:14]:  # one query each: the copy's log outgrows what it keeps
+        table.delete(key)
+        table.prune(4)
+        copy.nearest(table.snapshot(), query, 5)
+    assert len(copy._log_positions) == 4 and table.full_reads == reads + 1
+    # Five deletions since ``older``, the copy remembering four: read whole, those five its nearest.
+    assert_ranked(copy.nearest(older, query, 5), older.truth(query, 5))
+    assert set(copy.nearest(older, query, 5).rows.tolist()) == set(near[9:14])

@@ -12,6 +12,7 @@ import numpy as np
 import psycopg
 import pytest
 
+from app.retrieval import feature_copy, store
 from app.retrieval.distance import nearest_of
 from app.retrieval.postgres import PostgresStore
 from app.retrieval.store import SQLiteStore
@@ -36,6 +37,12 @@ class Database:
         with psycopg.connect(self.place) as connection:
             found = connection.execute("SELECT id, label, spectrum FROM shapes ORDER BY seq").fetchall()
         return [(i, label, np.array(values)) for i, label, values in found]
+
+    def logged(self) -> int:
+        """How many deletions the log holds."""
+        connect = sqlite3.connect if self.kind == "sqlite" else psycopg.connect
+        with connect(self.place) as connection:
+            return int(connection.execute("SELECT COUNT(*) FROM deleted_shapes").fetchone()[0])
 
     def truth(self, query: np.ndarray, top: int) -> list[str]:
         """The labels of the ``top`` stored shapes nearest ``query``, from every row."""
@@ -195,3 +202,26 @@ def test_a_deletion_rolled_back_leaves_a_gap_in_the_log_and_nothing_else(fresh_p
     with psycopg.connect(fresh_postgres) as connection:
         positions = [row[0] for row in connection.execute("SELECT position FROM deleted_shapes ORDER BY position")]
     assert positions == [2, 3]  # position 1 went to the deletion rolled back
+
+
+def test_a_log_pruned_past_another_process_s_last_read_is_not_trusted(database, monkeypatch):
+    """Each deletion prunes the log to its last DELETIONS_KEPT: a process that last read the log
+    before the oldest kept deletion reads every row again, one that kept up reads the log; every
+    answer is the database's."""
+    for module in (feature_copy, store):
+        monkeypatch.setattr(module, "DELETIONS_KEPT", 3)
+    reader, writer = database.store(), database.store()
+    stored = spectra(80, 16)
+    writer.add_many([f"person-{i}" for i in range(len(stored))], stored, "test")
+    query = stored[40] * 1.001
+    ids = [row[0] for row in database.rows()]
+    near = [ids[int(i)] for i in np.argsort(nearest_of(query, stored)[0]) if int(i) != len(ids) - 1][:12]
+    assert [m.record.label for m in reader.nearest(query, 7)] == database.truth(query, 7)
+    for victim in near[:2]:  # fewer than the log keeps
+        assert writer.delete(victim)
+    assert [m.record.label for m in reader.nearest(query, 7)] == database.truth(query, 7)
+    for victim in near[2:10]:  # more than the log keeps, the reader idle
+        assert writer.delete(victim)
+    assert database.logged() == 3
+    assert [m.record.label for m in reader.nearest(query, 7)] == database.truth(query, 7)
+    assert not writer.delete(near[0]) and database.logged() == 3  # nothing deleted, nothing pruned
