@@ -30,10 +30,9 @@ from torch import nn
 
 from app.retrieval.distance import features
 from training.benchmark_arguments import benchmark_parser
-from training.data.pairs import FULL_COVERAGE
 from training.learning.data import PairTable, SpectralData
 from training.learning.evaluate import served_predictors
-from training.learning.shapedna import TOP, identity_hits
+from training.learning.shapedna import TOP, full_coverage_pairs, identity_hits
 
 WIDTH = 512
 BATCH = 256
@@ -119,10 +118,7 @@ def main() -> None:
     data = SpectralData(args.data)
     stored = np.load(args.models / "shapes.npz")["spectra"]
     identity = np.arange(len(stored)) // data.shapes_per_identity
-    pairs = data.pairs
-    full = pairs.scenario == FULL_COVERAGE
-    train = pairs.rows(np.flatnonzero(full & (pairs.split == "train")))
-    test = pairs.rows(np.flatnonzero(full & (pairs.split != "train") & (pairs.split != "validation")))
+    train, test = full_coverage_pairs(data.pairs)
     trained_people = np.unique(identity[train.shape_a])
     unseen = ~np.isin(identity[test.shape_a], trained_people)
     stored_features = features(stored)

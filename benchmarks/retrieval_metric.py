@@ -28,10 +28,9 @@ import torch
 
 from app.retrieval.distance import features
 from training.benchmark_arguments import benchmark_parser
-from training.data.pairs import FULL_COVERAGE
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
-from training.learning.shapedna import TOP, identity_hits
+from training.learning.shapedna import TOP, full_coverage_pairs, identity_hits
 from training.learning.train_union import build_operator, memory_rows, predict
 from training.learning.union_net import UnionConfig
 
@@ -86,16 +85,13 @@ def main() -> None:
     data = SpectralData(args.data)
     stored = np.load(args.models / "shapes.npz")["spectra"]
     identity = np.arange(len(stored)) // data.shapes_per_identity
-    pairs = data.pairs
-    full = pairs.scenario == FULL_COVERAGE
-    train = pairs.rows(np.flatnonzero(full & (pairs.split == "train")))
-    test = pairs.rows(np.flatnonzero(full & (pairs.split != "train") & (pairs.split != "validation")))
+    train, test = full_coverage_pairs(data.pairs)
     trained_people = np.unique(identity[train.shape_a])
     assert not np.isin(identity[test.shape_a], trained_people).all(), "some test queries are of unseen people"
 
     # Fitted on training identities only.
     operator = trained_operator(data, args.runs / "union.pt")
-    memory_bodies = pairs.shape_a[memory_rows(data)]
+    memory_bodies = data.pairs.shape_a[memory_rows(data)]
     train_unions = predict(operator, train.a, train.b, (memory_bodies, train.shape_a))[0]
     union_metric = whitening(same_person_differences(train_unions, train.shape_a, stored, identity))
     trained_shapes = np.flatnonzero(np.isin(identity, trained_people))

@@ -27,11 +27,11 @@ from app.contract import PROFILE_SHARES
 from app.inference.body import open_surface
 from app.inference.models import SpectralModels
 from training.benchmark_arguments import benchmark_parser
-from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION
+from training.data.pairs import PARTIAL_UNION
 from training.data.spectra import MESH
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
-from training.learning.shapedna import TOP, hit_rates
+from training.learning.shapedna import TOP, full_coverage_pairs, hit_rates
 from training.reconstruction.blind_spots import blind_spot_masks, scans_of_shapes
 from training.reconstruction.evaluate import (
     BLIND_SPOT_SEED,
@@ -60,9 +60,7 @@ def main() -> None:
     masks = blind_spot_masks(data.template.vertices, len(rows), BLIND_SPOT_SEED)  # as the card's row draws them
     scans, scanned = scans_of_shapes(data, rows, masks, models.k)
     capped_scans, capped_shapes = scans_of_shapes(data, rows, masks, models.k, cap_holes=True)
-    full = pairs.rows(
-        np.flatnonzero((pairs.scenario == FULL_COVERAGE) & ~np.isin(pairs.split, ("train", "validation")))
-    )
+    full = full_coverage_pairs(pairs)[1]
     full_union, full_sigma = union(full.a, full.b)
     partial = pairs.rows(
         np.flatnonzero((pairs.scenario == PARTIAL_UNION) & (pairs.split == "test_a") & (pairs.variant == MESH))[

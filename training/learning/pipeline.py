@@ -25,7 +25,7 @@ from training.learning.export import export_localizer, export_union, localizer_p
 from training.learning.fit import is_finished, validation_history
 from training.learning.localizer_net import Localizer, LocalizerConfig
 from training.learning.masks import SERVED_LOCALIZER
-from training.learning.shapedna import complete_shapes, retrieval_table, save_seed
+from training.learning.shapedna import complete_shapes, full_coverage_pairs, retrieval_table, save_seed
 from training.learning.train_localizer import LocalizerTraining, train_localizer
 from training.learning.train_union import FLOOR_GRID, UnionTraining, predict, train_union
 from training.learning.union_net import PRIOR, UnionConfig
@@ -222,10 +222,7 @@ def retrieval_queries(data: SpectralData, union) -> dict[str, tuple[np.ndarray, 
     """Full-coverage test pairs (every variant): their predicted union (and, for an operator that
     reads it, their union told their overlap, told it and their boundary share, and their share
     profile: (n, shares, k)) and two part-only baselines."""
-    pairs = data.pairs
-    rows = pairs.rows(
-        np.flatnonzero((pairs.split != "train") & (pairs.split != "validation") & (pairs.scenario == "full"))
-    )
+    rows = full_coverage_pairs(data.pairs)[1]
     areas = data.mask_area(rows.mask_a), data.mask_area(rows.mask_b)
     queries = {
         "operator_union": (predict(union, rows.a, rows.b)[0], rows.shape_a),

@@ -14,8 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from app.retrieval.distance import nearest_of
+from training.data.pairs import FULL_COVERAGE
 from training.data.spectra import MESH, task_spectrum
-from training.learning.data import SpectralData
+from training.learning.data import PairTable, SpectralData
 
 TOP = (1, 5, 10)
 
@@ -42,6 +43,16 @@ def complete_shapes(data: SpectralData, workers: int | None = None) -> tuple[np.
     identity = np.arange(count) // data.shapes_per_identity
     labels = np.array([f"{identities[i]['group']}-{i:03d}" for i in identity])
     return labels, spectra, identity
+
+
+def full_coverage_pairs(pairs: PairTable) -> tuple[PairTable, PairTable]:
+    """(training, held-out) pairs of parts covering the body: the held-out ones (every test split
+    and variant) are the retrieval queries; a ranking for them may be fitted on the training ones."""
+    full = pairs.scenario == FULL_COVERAGE
+    return (
+        pairs.rows(np.flatnonzero(full & (pairs.split == "train"))),
+        pairs.rows(np.flatnonzero(full & ~np.isin(pairs.split, ("train", "validation")))),
+    )
 
 
 def save_seed(path: Path, labels: np.ndarray, spectra: np.ndarray) -> None:
