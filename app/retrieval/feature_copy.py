@@ -87,10 +87,9 @@ class FeatureCopy:
     snapshot is older than the copy (another thread read first) sees the copy's rows up to its
     last key, less those deleted since its snapshot: rows it would still see are not answered
     once another query saw them deleted; older than every deletion the copy remembers (at most
-    :data:`DELETIONS_KEPT`), it reads its snapshot whole. Ranking is then
-    what reading every row gave: the same features, the same order. Thread-safe: the service's
-    k-NN requests share one store; arrays are replaced, never changed, so a query ranks outside
-    the lock.
+    :data:`DELETIONS_KEPT`), it reads its snapshot whole. Ranking is then what reading every row
+    gave: the same features, the same order. Thread-safe: the service's k-NN requests share one
+    store; arrays are replaced, never changed, so a query ranks outside the lock.
     """
 
     def __init__(self) -> None:
@@ -110,11 +109,8 @@ class FeatureCopy:
         version, last, deletions = source.version(), source.last(), source.deletions()
         with self._lock:
             if version == self._version and deletions > self._deletions:
-                positions, deleted = source.deleted_after(self._deletions)
-                if self._known in deleted or self._deletions < source.forgotten():
+                if not self._applied_deletions(source):
                     self._version = None
-                else:
-                    self._forget(positions, deleted)
                 self._deletions = deletions
             if version != self._version:
                 self._version = version
@@ -147,6 +143,18 @@ class FeatureCopy:
             ranked = top_matches(spectra, seen.features, seen.squared, top)
             found.append(ranked._replace(rows=seen.keys[ranked.rows]))
         return merged(found, top)
+
+    def _applied_deletions(self, source: RowSource) -> bool:
+        """Stop answering the rows deleted since the copy last read the log; False, with nothing
+        applied, where the log cannot say which (pruned past that read, before reading it) or
+        the newest row went (SQLite may give its key to the next row): everything is read again."""
+        if self._deletions < source.forgotten():
+            return False
+        positions, deleted = source.deleted_after(self._deletions)
+        if self._known in deleted:
+            return False
+        self._forget(positions, deleted)
+        return True
 
     def _forget(self, positions: np.ndarray, deleted: np.ndarray) -> None:
         """Rows of ``deleted`` keys (logged at ``positions``) no longer answered; keys the copy
