@@ -32,7 +32,7 @@ from app.retrieval.distance import features
 from training.benchmark_arguments import benchmark_parser
 from training.learning.data import PairTable, SpectralData
 from training.learning.evaluate import served_predictors
-from training.learning.shapedna import TOP, full_coverage_pairs, identity_hits
+from training.learning.shapedna import TOP, full_coverage_pairs, identity_hits, stored_bodies
 
 WIDTH = 512
 BATCH = 256
@@ -116,8 +116,7 @@ def main() -> None:
     parser.add_argument("--temperature", type=float, default=1e-3)
     args = parser.parse_args()
     data = SpectralData(args.data)
-    stored = np.load(args.models / "shapes.npz")["spectra"]
-    identity = np.arange(len(stored)) // data.shapes_per_identity
+    stored, identity = stored_bodies(data, args.models)
     train, test = full_coverage_pairs(data.pairs)
     trained_people = np.unique(identity[train.shape_a])
     unseen = ~np.isin(identity[test.shape_a], trained_people)

@@ -30,7 +30,7 @@ from app.retrieval.distance import features
 from training.benchmark_arguments import benchmark_parser
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
-from training.learning.shapedna import TOP, full_coverage_pairs, identity_hits
+from training.learning.shapedna import TOP, full_coverage_pairs, identity_hits, stored_bodies
 from training.learning.train_union import build_operator, memory_rows, predict
 from training.learning.union_net import UnionConfig
 
@@ -83,8 +83,7 @@ def main() -> None:
     parser.add_argument("--models", type=Path, default=Path("models"))
     args = parser.parse_args()
     data = SpectralData(args.data)
-    stored = np.load(args.models / "shapes.npz")["spectra"]
-    identity = np.arange(len(stored)) // data.shapes_per_identity
+    stored, identity = stored_bodies(data, args.models)
     train, test = full_coverage_pairs(data.pairs)
     trained_people = np.unique(identity[train.shape_a])
     assert not np.isin(identity[test.shape_a], trained_people).all(), "some test queries are of unseen people"

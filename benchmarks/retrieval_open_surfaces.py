@@ -31,7 +31,7 @@ from training.data.pairs import PARTIAL_UNION
 from training.data.spectra import MESH
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
-from training.learning.shapedna import TOP, full_coverage_pairs, hit_rates
+from training.learning.shapedna import TOP, full_coverage_pairs, hit_rates, stored_bodies
 from training.reconstruction.blind_spots import blind_spot_masks, scans_of_shapes
 from training.reconstruction.evaluate import (
     BLIND_SPOT_SEED,
@@ -50,8 +50,7 @@ def main() -> None:
     args = parser.parse_args()
     data = SpectralData(args.data)
     models = SpectralModels(args.models)
-    stored = np.load(args.models / "shapes.npz")["spectra"]
-    identity = np.arange(len(stored)) // data.shapes_per_identity
+    stored, identity = stored_bodies(data, args.models)
     unknown = np.isin(identity, np.flatnonzero(np.isin(identity_groups(data), UNKNOWN_GROUPS)))
     union = served_predictors(args.models)[0]
     pairs = data.pairs

@@ -26,7 +26,7 @@ from training.benchmark_arguments import benchmark_parser
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors, served_told_predictor
 from training.learning.masks import SERVED_LOCALIZER, symmetric_scores
-from training.learning.shapedna import hit_rates
+from training.learning.shapedna import hit_rates, stored_bodies
 from training.reconstruction.evaluate import body_scores, closed_spectra
 from training.reconstruction.train import data_set_rest_bodies
 
@@ -73,8 +73,7 @@ def main() -> None:
     region = localizers[SERVED_LOCALIZER]
     template = data.template
     true_region = data.masks(chains.union_masks[:, -1])
-    stored = np.load(args.models / "shapes.npz")["spectra"]
-    stored_identity = np.arange(len(stored)) // data.shapes_per_identity
+    stored, stored_identity = stored_bodies(data, args.models)
     person = data.identity_of(chains.shape)
     print(
         "| from | IoU | coverage error (points) | vertex mean mm | vertex p95 mm | height error mm | area error "

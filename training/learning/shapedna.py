@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from app.retrieval.distance import nearest_of
+from app.retrieval.seed import SEED_FILE
 from training.data.pairs import FULL_COVERAGE
 from training.data.spectra import MESH, task_spectrum
 from training.learning.data import PairTable, SpectralData
@@ -43,6 +44,13 @@ def complete_shapes(data: SpectralData, workers: int | None = None) -> tuple[np.
     identity = np.arange(count) // data.shapes_per_identity
     labels = np.array([f"{identities[i]['group']}-{i:03d}" for i in identity])
     return labels, spectra, identity
+
+
+def stored_bodies(data: SpectralData, models: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(spectra (m, k), whose person each is) of a models folder's seed database: every posed
+    body of ``data``, in shape order (:func:`save_seed`), as the retrieval benchmarks query it."""
+    spectra = np.load(models / SEED_FILE)["spectra"]
+    return spectra, data.identity_of(np.arange(len(spectra)))
 
 
 def full_coverage_pairs(pairs: PairTable) -> tuple[PairTable, PairTable]:
