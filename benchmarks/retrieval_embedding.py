@@ -32,7 +32,7 @@ from app.retrieval.distance import features
 from training.benchmark_arguments import benchmark_parser
 from training.learning.data import PairTable, SpectralData
 from training.learning.evaluate import served_predictors
-from training.learning.shapedna import TOP, full_coverage_pairs, identity_hits, stored_bodies
+from training.learning.shapedna import feature_hits, full_coverage_pairs, stored_bodies
 
 WIDTH = 512
 BATCH = 256
@@ -99,17 +99,6 @@ def trained(pairs: PairTable, targets: np.ndarray, epochs: int, ranking: Ranking
     return model.eval()
 
 
-def hits(query_features: np.ndarray, query_shapes: np.ndarray, stored_features: np.ndarray, identity: np.ndarray):
-    """(queries, len(TOP)) whether the query's person is among its t nearest stored shapes."""
-    return np.array(
-        [
-            identity_hits(np.linalg.norm(stored_features - query, axis=1), identity[shape], shape, identity)
-            for query, shape in zip(query_features, query_shapes, strict=True)
-        ],
-        dtype=bool,
-    ).reshape(-1, len(TOP))
-
-
 def main() -> None:
     parser = benchmark_parser(__doc__, models=True)
     parser.add_argument("--epochs", type=int, default=60)
@@ -140,7 +129,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|")
     truth = features(test.union)
     for name, query in rows.items():
-        hit = hits(query, test.shape_a, stored_features, identity)
+        hit = feature_hits(query, test.shape_a, stored_features, identity)
         cells = " | ".join(f"{100 * rate:.1f} %" for rate in hit.mean(0))
         error = np.abs(np.expm1(query - truth)).mean()
         print(f"| {name} | {cells} | {100 * hit[unseen, 0].mean():.1f} % | {100 * error:.1f} % |")

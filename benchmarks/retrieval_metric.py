@@ -30,7 +30,7 @@ from app.retrieval.distance import features
 from training.benchmark_arguments import benchmark_parser
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
-from training.learning.shapedna import TOP, full_coverage_pairs, identity_hits, stored_bodies
+from training.learning.shapedna import feature_hits, full_coverage_pairs, stored_bodies
 from training.learning.train_union import build_operator, memory_rows, predict
 from training.learning.union_net import UnionConfig
 
@@ -65,18 +65,6 @@ def same_person_differences(
     return np.concatenate(out)
 
 
-def hits(query_features: np.ndarray, query_shapes: np.ndarray, stored_features: np.ndarray, identity, weights=None):
-    """(queries, len(TOP)) whether the query's person is among its t nearest stored shapes (its
-    own shape excluded), by Euclidean distance of (already transformed) features, each difference
-    times the query's ``weights`` row when given."""
-    weights = np.ones_like(query_features) if weights is None else weights
-    out = []
-    for query, weight, shape in zip(query_features, weights, query_shapes, strict=True):
-        distance = np.sqrt((((stored_features - query) * weight) ** 2).sum(-1))
-        out.append(identity_hits(distance, identity[shape], shape, identity))
-    return np.array(out, dtype=bool).reshape(-1, len(TOP))
-
-
 def main() -> None:
     parser = benchmark_parser(__doc__)
     parser.add_argument("--runs", type=Path, default=Path("runs/standard"))
@@ -104,22 +92,22 @@ def main() -> None:
     every_shape = np.arange(len(stored))
     unseen = ~np.isin(identity[test.shape_a], trained_people)
     table = {
-        ("predicted unions", "Euclidean (ShapeDNA, served)"): hits(
+        ("predicted unions", "Euclidean (ShapeDNA, served)"): feature_hits(
             query_features, test.shape_a, stored_features, identity
         ),
-        ("predicted unions", "σ-weighted"): hits(
+        ("predicted unions", "σ-weighted"): feature_hits(
             query_features, test.shape_a, stored_features, identity, 1 / np.sqrt(relative_sigma**2 + pose_spread**2)
         ),
-        ("predicted unions", "Mahalanobis, pose"): hits(
+        ("predicted unions", "Mahalanobis, pose"): feature_hits(
             query_features @ pose_metric.T, test.shape_a, stored_features @ pose_metric.T, identity
         ),
-        ("predicted unions", "Mahalanobis, union error + pose"): hits(
+        ("predicted unions", "Mahalanobis, union error + pose"): feature_hits(
             query_features @ union_metric.T, test.shape_a, stored_features @ union_metric.T, identity
         ),
-        ("complete shapes", "Euclidean (ShapeDNA, served)"): hits(
+        ("complete shapes", "Euclidean (ShapeDNA, served)"): feature_hits(
             stored_features, every_shape, stored_features, identity
         ),
-        ("complete shapes", "Mahalanobis, pose"): hits(
+        ("complete shapes", "Mahalanobis, pose"): feature_hits(
             stored_features @ pose_metric.T, every_shape, stored_features @ pose_metric.T, identity
         ),
     }
