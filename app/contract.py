@@ -46,6 +46,19 @@ INTERVAL_Z = 1.6449  # σ is calibrated so that union ± INTERVAL_Z·σ holds 90
 # benchmarks/RESULTS.md, "share profile").
 PROFILE_SHARES = np.linspace(0.0, 1.0, 11)
 
+# The correspondence model (optional: served when present): each vertex of an uploaded part →
+# its place on the template's rest pose. Inputs, for one part of n vertices, as
+# app.geometry.descriptors computes them: features (n, F) float32; mass (n,) float32, m²;
+# basis (n, k) float32, the part's free-boundary eigenfunctions, M-orthonormal; eigenvalues
+# (k,) float32, 1/m²; neighbours (n, K) int64 and weights (n, K, 2) float32, the gradient
+# stencil (app.geometry.tangent). Outputs: position (n, 3) float32, metres on the template's
+# rest pose; confidence (n,) float32, the probability of the template patch it was placed in.
+CORRESPONDENCE_FILE = "correspondence.onnx"
+CORRESPONDENCE_INPUTS = ("features", "mass", "basis", "eigenvalues", "neighbours", "weights")
+CORRESPONDENCE_OUTPUTS = ("position", "confidence")
+CORRESPONDENCE_BASIS = 64  # eigenfunctions of a part the network diffuses on
+HKS_TIMES = np.geomspace(2e-3, 2e-1, 12)  # m²: heat diffusion from ~4 cm to ~45 cm
+
 # The spectrum definition: what app.geometry computes from a shape (ARCHITECTURE.md, "Spectra: the
 # one definition"). Bump SPECTRUM_VERSION whenever the spectrum code changes what it computes
 # (Laplacian, mass, boundary conditions, cleaning), so that models trained before are refused.

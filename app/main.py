@@ -16,7 +16,18 @@ from app.api.operands import MAX_OPERANDS
 from app.api.pages import install_pages
 from app.api.problems import install_problem_handlers
 from app.api.resources import Resources
-from app.api.routes import health, localize, models, overlap, reconstruct, retrieve, shapes, spectrum, unions
+from app.api.routes import (
+    correspondence,
+    health,
+    localize,
+    models,
+    overlap,
+    reconstruct,
+    retrieve,
+    shapes,
+    spectrum,
+    unions,
+)
 from app.api.shutdown import flip_readiness_on_exit_signals
 from app.api.solver import SolverPool
 from app.api.upload_limit import UploadLimitMiddleware
@@ -87,6 +98,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(health.router)
     app.include_router(metrics_router)
     app.include_router(spectrum.router, prefix=API_PREFIX)
-    for routes in (unions, overlap, localize, reconstruct, models, retrieve, shapes):
+    for routes in (unions, overlap, localize, correspondence, reconstruct, models, retrieve, shapes):
         app.include_router(routes.router, prefix=API_PREFIX)
     return app

@@ -149,6 +149,23 @@ def train_decoder_command(
     typer.echo(json.dumps(metrics["sets"], indent=1))
 
 
+@cli.command("build-parts")
+def build_parts_command(
+    out: Annotated[Path, typer.Option(help="Parts directory (resumes if it exists).")] = Path("data/parts-standard"),
+    preset: Annotated[str, typer.Option(help="tiny or standard.")] = "standard",
+    seed: Annotated[int, typer.Option()] = 0,
+    workers: Annotated[int | None, typer.Option(help="Local processes (default: all cores).")] = None,
+) -> None:
+    """Cut anny bodies into parts with known template correspondences (the correspondence model's data)."""
+    import json
+
+    from training.correspondence.parts import PARTS_PRESETS, build_parts
+
+    if preset not in PARTS_PRESETS:
+        raise typer.BadParameter(f"unknown preset {preset!r}")
+    typer.echo(json.dumps(build_parts(PARTS_PRESETS[preset], out, seed=seed, workers=workers)))
+
+
 def _pipeline(verb: str, data: Path, runs: Path, models: Path, preset: str, seed: int) -> None:
     from training.learning.pipeline import TRAINING_PRESETS, UnfinishedRuns, run_pipeline
 

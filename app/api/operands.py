@@ -19,6 +19,7 @@ from app.api.problems import ProblemError
 from app.api.solver import SolverPool
 from app.core.config import Settings
 from app.core.errors import InputError
+from app.geometry.descriptors import PartInputs
 from app.geometry.io import resolve_file_type
 from app.geometry.overlap import Footprint
 from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport
@@ -120,6 +121,7 @@ class Operand:
     eigenvalues: list[float]
     report: SpectrumReport | None  # what the solve found, for files
     footprint: Footprint | None = None  # where an uploaded shape lies, when asked for
+    part: PartInputs | None = None  # what the correspondence network reads of an upload, when asked for
 
 
 def parse_spectra(text: str | None, k: int) -> list[list[float]]:
@@ -187,10 +189,12 @@ async def resolve_operands(
     check_count: Callable[[int], object] | None = None,
     footprints: bool = False,
     cap_holes: bool = False,
+    descriptors: bool = False,
 ) -> tuple[list[Operand], float]:
     """Every operand's spectrum (at least one), and the milliseconds spent solving uploaded files.
     ``check_count`` sees how many operands there are before any upload is solved (a mismatch
-    it raises costs no solve); with ``footprints`` each uploaded file's operand says where it lies;
+    it raises costs no solve); with ``footprints`` each uploaded file's operand says where it lies,
+    with ``descriptors`` what the correspondence network reads of it;
     with ``cap_holes`` the one operand must be an uploaded scan, solved with its holes capped."""
     given = parse_spectra(spectra, k)
     files = files or []
@@ -217,7 +221,7 @@ async def resolve_operands(
     options = upload_options(settings, k, units, scale, cap_holes=cap_holes)
     sources = [f"files[{index}] {upload.filename or ''}".strip() for index, upload in enumerate(files)]
     started = time.perf_counter()
-    outcomes = await _solve_all(request, files, options, footprints)
+    outcomes = await _solve_all(request, files, options, footprints, descriptors)
     solve_ms = (time.perf_counter() - started) * 1e3
     for source, outcome in zip(sources, outcomes, strict=True):
         if isinstance(outcome, InputError):
@@ -225,7 +229,7 @@ async def resolve_operands(
         if isinstance(outcome, BaseException):
             raise outcome  # the first failing file, in upload order
     operands = [
-        Operand(source, solved.report.eigenvalues, solved.report, solved.footprint)
+        Operand(source, solved.report.eigenvalues, solved.report, solved.footprint, solved.part)
         for source, solved in zip(sources, outcomes, strict=True)
     ]
     operands += [Operand(f"spectra[{i}]", values, None) for i, values in enumerate(given)]
@@ -233,7 +237,7 @@ async def resolve_operands(
 
 
 async def _solve_all(
-    request: Request, files: list[UploadFile], options: SpectrumOptions, footprints: bool
+    request: Request, files: list[UploadFile], options: SpectrumOptions, footprints: bool, descriptors: bool
 ) -> list[Solved | BaseException]:
     """Every file solved at once on the solver pool (a union of two scans costs one solve's
     latency, not two), each outcome in upload order: a report, or the exception it raised.
@@ -245,6 +249,8 @@ async def _solve_all(
     async def solve(upload: UploadFile) -> Solved:
         data = await upload.read()
         file_type = resolve_file_type(upload.filename, None)
-        return await solver.solve_with_functions(data, file_type, options, vectors=False, footprint=footprints)
+        return await solver.solve_with_functions(
+            data, file_type, options, vectors=False, footprint=footprints, descriptors=descriptors
+        )
 
     return list(await asyncio.gather(*(solve(upload) for upload in files), return_exceptions=True))

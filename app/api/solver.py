@@ -67,7 +67,9 @@ def _map_blas_buffers() -> None:
     blas.dgemm(1.0, square, square)
 
 
-def _solve_task(data: bytes, file_type: str, options: SpectrumOptions, vectors: bool, footprint: bool) -> Solved:
+def _solve_task(
+    data: bytes, file_type: str, options: SpectrumOptions, vectors: bool, footprint: bool, descriptors: bool
+) -> Solved:
     """The worker's task: a solve, with a memory failure answered without its traceback.
 
     A ``MemoryError``'s traceback holds the frames of the failed solve, and with them every
@@ -78,7 +80,7 @@ def _solve_task(data: bytes, file_type: str, options: SpectrumOptions, vectors: 
     has let the old one go, so the worker is back at its idle size when it answers.
     """
     try:
-        return solve_bytes(data, file_type, options, vectors=vectors, footprint=footprint)
+        return solve_bytes(data, file_type, options, vectors=vectors, footprint=footprint, descriptors=descriptors)
     except MemoryError:
         pass
     gc.collect()
@@ -149,12 +151,20 @@ class SolverPool:
         return (await self.solve_with_functions(data, file_type, options, vectors=False)).report
 
     async def solve_with_functions(
-        self, data: bytes, file_type: str, options: SpectrumOptions, *, vectors: bool = True, footprint: bool = False
+        self,
+        data: bytes,
+        file_type: str,
+        options: SpectrumOptions,
+        *,
+        vectors: bool = True,
+        footprint: bool = False,
+        descriptors: bool = False,
     ) -> Solved:
-        """The solve with (``vectors``) its eigenfunctions and their vertices' provenance, and
-        (``footprint``) where the shape lies (:mod:`app.geometry.overlap`)."""
+        """The solve with (``vectors``) its eigenfunctions and their vertices' provenance,
+        (``footprint``) where the shape lies (:mod:`app.geometry.overlap`) and (``descriptors``)
+        what the correspondence network reads of it (:mod:`app.geometry.descriptors`)."""
         async with self.limiter:
-            task = (data, file_type, options, vectors, footprint)
+            task = (data, file_type, options, vectors, footprint, descriptors)
             future = self._pool.schedule(_solve_task, args=task, timeout=self.timeout_s)
             try:
                 solved: Solved = await asyncio.wrap_future(future)

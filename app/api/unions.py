@@ -16,6 +16,7 @@ from app.api.operands import NOT_TOLD, Operand, Told, parse_shares, resolve_oper
 from app.core.config import Settings
 from app.geometry.overlap import measured_fold
 from app.geometry.plausibility import size_warnings
+from app.inference.correspondence import TELL_MEASURED_OVERLAP, PlacedPart
 from app.inference.models import (
     InvalidOverlap,
     SpectralModels,
@@ -24,6 +25,10 @@ from app.inference.models import (
     checked_overlaps,
     require_overlap_reader,
 )
+
+# Where a union's overlaps came from: the client, registered views' footprints, or the parts'
+# places on the template.
+OverlapSource = Literal["told", "footprints", "correspondence"]
 
 
 @dataclass(frozen=True)
@@ -37,6 +42,9 @@ class UnionOutcome:
     warnings: list[str]
     overlaps: list[float]  # each union step's overlap as told or measured; empty when neither
     boundaries: list[float]  # each step's boundary share as told or measured; empty when neither
+    overlaps_from: OverlapSource | None  # where they came from
+    overlaps_told: bool  # whether the union operator was told them
+    placed: list[PlacedPart] | None  # each operand placed on the template (uploads, correspondence model)
 
     def fields(self, models: SpectralModels) -> dict:
         """The response fields every union-based endpoint shares."""
@@ -52,6 +60,8 @@ class UnionOutcome:
             "warnings": self.warnings,
             "overlaps": self.overlaps,
             "boundaries": self.boundaries,
+            "overlaps_from": self.overlaps_from,
+            "overlaps_told": self.overlaps_told,
         }
 
 
@@ -78,6 +88,7 @@ async def union_of_operands(
         checked_overlaps(overlaps, count, models.reads_overlap)
         checked_boundaries(boundaries, overlaps, count, models.reads_boundary)
 
+    places = models.correspondence is not None and bool(files) and not (spectra and spectra.strip())
     operands, solve_ms = await resolve_operands(
         request,
         settings,
@@ -89,19 +100,37 @@ async def union_of_operands(
         check_overlaps,
         footprints=told.measure,
         cap_holes=cap_holes,
+        descriptors=places,
     )
+    source: OverlapSource | None = "told" if overlaps is not None else None
     if told.measure:  # k-d trees of up to UNION_POINTS points per step: off the event loop
         footprints = [o.footprint for o in operands if o.footprint is not None]
         fold = await anyio.to_thread.run_sync(measured_fold, footprints)
         overlaps, boundaries = fold.overlaps, fold.boundaries if models.reads_boundary else None
+        source = "footprints"
+    placed = await anyio.to_thread.run_sync(_placed, models, operands) if places else None
+    tell = source is not None
+    if placed is not None and source is None and len(placed) > 1:
+        overlaps, boundaries = models.correspondence.regions.fold([part.region for part in placed])
+        source, tell = "correspondence", TELL_MEASURED_OVERLAP and models.reads_overlap
+        boundaries = boundaries if models.reads_boundary else None
     started = time.perf_counter()
     values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
-    result = await anyio.to_thread.run_sync(models.union, values, overlaps, boundaries)
+    told_overlaps, told_boundaries = (overlaps, boundaries) if tell else (None, None)
+    result = await anyio.to_thread.run_sync(models.union, values, told_overlaps, told_boundaries)
     seconds = time.perf_counter() - started
     INFERENCE.labels("union").observe(seconds)
     warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]
     warnings += size_warnings(values, [o.source for o in operands])
-    return UnionOutcome(operands, result, solve_ms, seconds * 1e3, warnings, overlaps or [], boundaries or [])
+    return UnionOutcome(
+        operands, result, solve_ms, seconds * 1e3, warnings, overlaps or [], boundaries or [], source, tell, placed
+    )
+
+
+def _placed(models: SpectralModels, operands: list[Operand]) -> list[PlacedPart]:
+    """Every uploaded operand placed on the template by the correspondence model (timed)."""
+    with INFERENCE.labels("correspondence").time():
+        return [models.correspondence.placed(operand.part) for operand in operands]
 
 
 def _check_measurable(

@@ -3,7 +3,7 @@
 import io
 import json
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Annotated, Literal
 
 import numpy as np
@@ -11,6 +11,7 @@ from pydantic import Field
 
 from app.contract import MAX_HOLE_EDGES
 from app.core.errors import InputError
+from app.geometry.descriptors import PartInputs, cloud_inputs, mesh_inputs
 from app.geometry.errors import InvalidGeometry
 from app.geometry.io import load_shape, unit_scale
 from app.geometry.laplacian import Operators, mesh_operators, point_cloud_operators
@@ -81,6 +82,7 @@ class Solved:
     functions: np.ndarray | None  # (vertices, k), M-orthonormal, 0 on Dirichlet boundary vertices
     sources: np.ndarray  # (vertices,): index in the uploaded vertex list, -1 for a pin-hole's centre
     footprint: Footprint | None = None  # with ``footprint``: where the shape lies, to measure overlaps by
+    part: PartInputs | None = None  # with ``descriptors``: what the correspondence network reads of it
 
     def npz(self) -> bytes:
         """The eigenfunctions as the API and the CLI hand them out: an ``.npz`` of NPY arrays
@@ -98,10 +100,17 @@ class Solved:
 
 
 def solve_bytes(
-    data: bytes, file_type: str, options: SpectrumOptions, *, vectors: bool, footprint: bool = False
+    data: bytes,
+    file_type: str,
+    options: SpectrumOptions,
+    *,
+    vectors: bool,
+    footprint: bool = False,
+    descriptors: bool = False,
 ) -> Solved:
     """Parse, validate and solve, with or without the eigenfunctions (whose size, vertices × k,
-    is bounded by MAX_FUNCTION_VALUES: the answer is as large as that) and the footprint."""
+    is bounded by MAX_FUNCTION_VALUES: the answer is as large as that), the footprint and the
+    correspondence network's inputs (:mod:`app.geometry.descriptors`)."""
     scale = unit_scale(options.units, options.scale)
     shape = load_shape(data, file_type, scale=scale, max_vertices=options.max_vertices)
     count = len(shape.vertices) if isinstance(shape, Mesh) else len(shape.points)
@@ -111,8 +120,8 @@ def solve_bytes(
             "(40 MB): ask for fewer eigenvalues"
         )
     if isinstance(shape, Mesh):
-        return _solve_mesh(shape, options, scale, vectors, footprint)
-    return _solve_cloud(shape, options, scale, vectors, footprint)
+        return _solve_mesh(shape, options, scale, vectors, footprint, descriptors)
+    return _solve_cloud(shape, options, scale, vectors, footprint, descriptors)
 
 
 def mesh_spectrum(mesh: Mesh, options: SpectrumOptions, scale: float = 1.0) -> SpectrumReport:
@@ -125,12 +134,19 @@ def cloud_spectrum(cloud: PointCloud, options: SpectrumOptions, scale: float = 1
     return _solve_cloud(cloud, options, scale, vectors=False).report
 
 
-def _solve_mesh(mesh: Mesh, options: SpectrumOptions, scale: float, vectors: bool, footprint: bool = False) -> Solved:
+def _solve_mesh(
+    mesh: Mesh,
+    options: SpectrumOptions,
+    scale: float,
+    vectors: bool,
+    footprint: bool = False,
+    descriptors: bool = False,
+) -> Solved:
     prepared = prepare_mesh(mesh, k=options.k, max_hole_edges=options.max_hole_edges, cap_holes=options.cap_holes)
     started = time.perf_counter()
     operators = mesh_operators(prepared.mesh.vertices, prepared.mesh.faces)
     has_boundary = bool(prepared.boundary.any())
-    return _solve(
+    solved = _solve(
         operators,
         prepared.boundary if has_boundary else None,
         options.k,
@@ -144,17 +160,25 @@ def _solve_mesh(mesh: Mesh, options: SpectrumOptions, scale: float, vectors: boo
         scale=scale,
         points=prepared.mesh.vertices if footprint else None,
     )
+    if not descriptors:
+        return solved
+    return replace(solved, part=mesh_inputs(prepared.mesh.vertices, prepared.mesh.faces, operators=operators))
 
 
 def _solve_cloud(
-    cloud: PointCloud, options: SpectrumOptions, scale: float, vectors: bool, footprint: bool = False
+    cloud: PointCloud,
+    options: SpectrumOptions,
+    scale: float,
+    vectors: bool,
+    footprint: bool = False,
+    descriptors: bool = False,
 ) -> Solved:
     if options.cap_holes:
         raise InputError("cap_holes caps a mesh's boundary loops; a point cloud has none: declare it closed instead")
     prepared = prepare_cloud(cloud, k=options.k, closed=options.closed, boundary_indices=options.boundary_indices)
     started = time.perf_counter()
     operators = point_cloud_operators(prepared.cloud.points)
-    return _solve(
+    solved = _solve(
         operators,
         prepared.boundary,
         options.k,
@@ -168,6 +192,9 @@ def _solve_cloud(
         scale=scale,
         points=prepared.cloud.points if footprint else None,
     )
+    if not descriptors:
+        return solved
+    return replace(solved, part=cloud_inputs(prepared.cloud.points, prepared.boundary, operators=operators))
 
 
 def _solve(

@@ -13,8 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import onnxruntime as ort
+from scipy.spatial import cKDTree
 
 from app.contract import (
+    CORRESPONDENCE_FILE,
     INTERVAL_Z,
     LOCALIZER_FILE,
     LOCALIZER_INPUTS,
@@ -30,6 +32,7 @@ from app.contract import (
 )
 from app.core.errors import InputError
 from app.geometry.laplacian import mesh_operators
+from app.inference.correspondence import CorrespondenceModel, PlacedPart, TemplateRegions
 from app.inference.manifest import verify_manifest
 from app.inference.spectra import InvalidSpectrum
 from app.inference.template import PART_NAMES, Template, localized_region, part_coverage
@@ -154,7 +157,7 @@ def _session(path: Path, threads: int) -> ort.InferenceSession:
 
 class SpectralModels:
     """Union operator, localizer and template from one models directory, and the shape decoder
-    when the directory has one (its manifest records it)."""
+    and the correspondence model when the directory has them (its manifest records them)."""
 
     def __init__(self, directory: Path, threads: int = 1) -> None:
         checked = verify_manifest(directory)
@@ -178,7 +181,12 @@ class SpectralModels:
             decoded = self.decoder_session.get_outputs()[0].shape
             if self.decoder_session.get_inputs()[0].shape[1] != self.k or decoded[1] != vertex_count:
                 raise ValueError("the shape decoder does not read this k or write this template")
-        served = [UNION_FILE, LOCALIZER_FILE] + ([RECONSTRUCTION_FILE] if self.decoder_session else [])
+        self.correspondence = None
+        if CORRESPONDENCE_FILE in checked:
+            regions = TemplateRegions(self.template, self.vertex_area)
+            self.correspondence = CorrespondenceModel(directory / CORRESPONDENCE_FILE, regions, threads)
+        optional = [name for name in (RECONSTRUCTION_FILE, CORRESPONDENCE_FILE) if name in checked]
+        served = [UNION_FILE, LOCALIZER_FILE, *optional]
         digest = hashlib.sha256(b"".join((directory / name).read_bytes() for name in served))
         self.version = digest.hexdigest()[:12]  # content hash: two replicas agree iff they serve the same models
 
@@ -224,6 +232,20 @@ class SpectralModels:
         _require_finite(probability)
         parts_probability = list(probability[1:, None])  # one (1, n) row per part
         inside = localized_region(probability[:1], parts_probability, self.vertex_area, self.template.mirror)[0]
+        return self.region_of(inside)
+
+    def placed_region(self, placed: Sequence[PlacedPart]) -> tuple[Region, np.ndarray]:
+        """The union of placed parts' regions, and per template vertex in it the confidence of
+        the nearest placed part vertex (a vertex the closing filled takes its neighbour's)."""
+        inside = np.logical_or.reduce([part.region for part in placed])
+        positions = np.concatenate([part.placement.position for part in placed])
+        confidence = np.concatenate([part.placement.confidence for part in placed])
+        vertices = np.flatnonzero(inside)
+        _, nearest = cKDTree(positions).query(self.template.vertices[vertices])
+        return self.region_of(inside), confidence[nearest]
+
+    def region_of(self, inside: np.ndarray) -> Region:
+        """A template mask (V,) as a region: its vertices, area share and part coverage."""
         shares = part_coverage(inside, self.vertex_area, self.template.labels)
         coverage = {name: float(share) for name, share in zip(PART_NAMES, shares, strict=True)}
         area = self.vertex_area

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
 import trimesh
 
 SIDED_PARTS = ("upper_arm", "forearm", "hand", "thigh", "shin", "foot")
@@ -54,6 +55,43 @@ class Template:
             data["labels"].astype(np.int64),
             data["mirror"].astype(np.int64),
         )
+
+
+def faces_inside(mask: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Faces whose three vertices are in ``mask`` (three ands: ~10x faster than ``all(axis=1)``)."""
+    return mask[faces[:, 0]] & mask[faces[:, 1]] & mask[faces[:, 2]]
+
+
+class RegionBoundaries:
+    """Boundary lengths of regions of one template: the edges with a face of the region on one
+    side only (a face is in a region when its three vertices are, :func:`faces_inside`), on the
+    rest-pose template. What the union operator's boundary share is made of."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
+        ends = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+        edges, which = np.unique(ends, axis=0, return_inverse=True)
+        rows = np.tile(np.arange(len(faces)), 3)
+        ones = np.ones(len(rows), np.float32)
+        self.faces = faces
+        self.incidence = sp.csr_matrix((ones, (rows, which.ravel())), shape=(len(faces), len(edges)))
+        self.edge_length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
+
+    def lengths(self, masks: np.ndarray) -> np.ndarray:
+        """(m,) boundary length (m) of each of the (m, n) boolean vertex masks."""
+        inside = faces_inside(masks.T, self.faces).astype(np.float32)  # (faces, m)
+        sides = (self.incidence.T @ inside).T  # faces of the region on each edge
+        return (sides == 1) @ self.edge_length
+
+    def shares(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(m,) the boundary share of unions of (m, n) masks (:func:`boundary_share`)."""
+        return boundary_share(self.lengths(a), self.lengths(b), self.lengths(a | b))
+
+
+def boundary_share(a: np.ndarray, b: np.ndarray, union: np.ndarray) -> np.ndarray:
+    """L(∂(A ∪ B)) / (L(∂A) + L(∂B)) from the three boundary lengths: 0 where neither part has a
+    boundary (their union is closed too)."""
+    total = a + b
+    return np.where(total > 0, union / np.maximum(total, 1e-12), 0.0)
 
 
 def part_coverage(masks: np.ndarray, vertex_area: np.ndarray, labels: np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ from app.geometry.errors import GeometryError
 from app.geometry.pipeline import SpectrumOptions, cloud_spectrum, mesh_spectrum
 from app.geometry.shapes import Mesh, PointCloud
 from app.geometry.topology import boundary_vertex_mask, drop_unreferenced
-from training.data.regions import faces_inside
+from app.inference.template import faces_inside
 
 MESH, REMESHED, CLOUD = "mesh", "remeshed", "cloud"
 VARIANTS = (MESH, REMESHED, CLOUD)

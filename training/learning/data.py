@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from app.geometry.laplacian import mesh_operators
-from training.data.regions import RegionBoundaries, boundary_share
+from app.inference.template import RegionBoundaries, boundary_share
 from training.data.spectra import MESH
 from training.data.template import Template
 

@@ -37,10 +37,20 @@ OPSET = 23  # ONNX's own Attention operator (union_net.EncoderLayer); Gelu one n
 SOURCE_METADATA = "pkg.torch.onnx.stack_trace"  # per node: where in our Python it was traced
 
 
-def _export(model: torch.nn.Module, example: tuple[torch.Tensor, ...], path: Path, inputs, outputs) -> None:
+def _export(
+    model: torch.nn.Module,
+    example: tuple[torch.Tensor, ...],
+    path: Path,
+    inputs,
+    outputs,
+    dynamic_shapes: tuple[dict, ...] | None = None,
+) -> None:
+    """Export with every input's first axis the batch, unless ``dynamic_shapes`` says otherwise."""
     model = model.cpu().eval()
     path.parent.mkdir(parents=True, exist_ok=True)
-    batch = torch.export.Dim("batch", min=1, max=65536)
+    if dynamic_shapes is None:
+        batch = torch.export.Dim("batch", min=1, max=65536)
+        dynamic_shapes = tuple({0: batch} for _ in example)
     torch.onnx.export(
         model,
         example,
@@ -48,7 +58,7 @@ def _export(model: torch.nn.Module, example: tuple[torch.Tensor, ...], path: Pat
         input_names=list(inputs),
         output_names=list(outputs),
         opset_version=OPSET,
-        dynamic_shapes=tuple({0: batch} for _ in example),
+        dynamic_shapes=dynamic_shapes,
         external_data=False,
         dynamo=True,
         verbose=False,

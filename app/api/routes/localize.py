@@ -24,6 +24,16 @@ class LocalizeResponse(UnionResponse):
     area_fraction: float = Field(description="Share of the template's area covered.")
     part_coverage: dict[str, float] = Field(description="Covered share of each body part's area.")
     template_vertices: int = Field(description="Vertices of the template body the indices refer to.")
+    located_by: Literal["correspondence", "spectrum"] = Field(
+        description="correspondence: each uploaded part's vertices placed on the template (every operand an "
+        "uploaded file, and the correspondence model served), the region the union of the parts' regions, on "
+        "the side scanned; spectrum: the localizer's reading of the union's spectrum (up to left/right)."
+    )
+    vertex_confidence: list[float] | None = Field(
+        None,
+        description="With correspondence: per vertex of vertices, the confidence of the nearest placed part "
+        "vertex (the probability of the template patch it was placed in).",
+    )
 
 
 @router.post(
@@ -48,14 +58,19 @@ async def localize(
     ] = "json",
 ) -> LocalizeResponse | Response:
     """Where on the template body the union of the operands lies, and how much of each part it
-    covers: the localizer's region of the union, as large as its probabilities expect, grown to
-    hold each operand's own region."""
+    covers: for uploaded parts, the union of the regions their vertices are placed on (the
+    correspondence model); for spectra, the localizer's region of the union, as large as its
+    probabilities expect, grown to hold each operand's own region."""
     outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told)
-    started = time.perf_counter()
-    # A union holds each of its operands' own regions; one operand is its own union.
-    parts = [np.asarray(o.eigenvalues) for o in outcome.operands] if len(outcome.operands) > 1 else []
-    region = await anyio.to_thread.run_sync(models.localize, outcome.result.eigenvalues, parts)
-    INFERENCE.labels("localizer").observe(time.perf_counter() - started)
+    confidence = None
+    if outcome.placed is not None:
+        region, confidence = await anyio.to_thread.run_sync(models.placed_region, outcome.placed)
+    else:
+        started = time.perf_counter()
+        # A union holds each of its operands' own regions; one operand is its own union.
+        parts = [np.asarray(o.eigenvalues) for o in outcome.operands] if len(outcome.operands) > 1 else []
+        region = await anyio.to_thread.run_sync(models.localize, outcome.result.eigenvalues, parts)
+        INFERENCE.labels("localizer").observe(time.perf_counter() - started)
     if format == "ply":
         ply = await anyio.to_thread.run_sync(coloured_template, models.template, region.vertices)
         return Response(
@@ -67,4 +82,6 @@ async def localize(
         area_fraction=region.area_fraction,
         part_coverage=region.part_coverage,
         template_vertices=len(models.template.vertices),
+        located_by="spectrum" if confidence is None else "correspondence",
+        vertex_confidence=None if confidence is None else np.round(confidence, 3).tolist(),
     )

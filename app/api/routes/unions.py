@@ -4,6 +4,8 @@ Operands are uploaded files and/or spectra (see :mod:`app.api.operands`), in 1/m
 more than two operands is folded left to right, exactly as the operator was trained to chain.
 """
 
+from typing import Literal
+
 from fastapi import APIRouter, Request
 from pydantic import BaseModel, Field
 
@@ -43,6 +45,16 @@ class UnionResponse(BaseModel):
         description="Each union step's boundary share (how much of the two operands' boundary length is left on "
         "the union's), as told in boundary or measured with measure_overlap by models that read it; empty when "
         "neither.",
+    )
+    overlaps_from: Literal["told", "footprints", "correspondence"] | None = Field(
+        None,
+        description="Where overlaps and boundaries came from: told by the client (overlap, boundary), measured "
+        "from registered views (measure_overlap), or from the uploaded parts' places on the template (the "
+        "correspondence model, whenever every operand is an uploaded file and the client told nothing); null "
+        "when none.",
+    )
+    overlaps_told: bool = Field(
+        False, description="Whether the union operator was told these overlaps (a client's own always are)."
     )
     warnings: list[str] = Field(
         default_factory=list,

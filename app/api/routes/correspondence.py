@@ -1,0 +1,150 @@
+"""``POST /v1/correspondence``: where on the template body each vertex of one uploaded part lies."""
+
+import io
+from typing import Annotated, Literal
+
+import anyio
+import numpy as np
+import trimesh
+from fastapi import APIRouter, File, Form, Query, Request, Response, UploadFile
+from pydantic import BaseModel, Field
+
+from app.api.deps import ModelsDep, SettingsDep
+from app.api.metrics import INFERENCE
+from app.api.operands import ScaleQuery, UnitsQuery, upload_options
+from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, ProblemError, problem_responses
+from app.api.routes.spectrum import NPZ_MEDIA_TYPE
+from app.api.routes.unions import MODEL_VERSION_FIELD
+from app.geometry.io import ALLOWED_TYPES, resolve_file_type
+from app.geometry.pipeline import Solved
+from app.inference.correspondence import Placement
+from app.inference.models import SpectralModels
+
+router = APIRouter(tags=["correspondence"])
+ROUTE = "/correspondence"
+POSITION_DECIMALS = 4  # 0.1 mm: far below the model's error, and it keeps the JSON small
+CONFIDENCE_DECIMALS = 3
+
+
+class CorrespondenceRegion(BaseModel):
+    vertices: list[int] = Field(description="Template vertices the part covers: those its vertices reach, closed.")
+    area_fraction: float = Field(description="Share of the template's area covered.")
+    part_coverage: dict[str, float] = Field(description="Covered share of each body part's area.")
+
+
+class CorrespondenceResponse(BaseModel):
+    model_version: str = MODEL_VERSION_FIELD
+    vertices: int = Field(description="Vertices (or points) placed: the upload's, after the service's cleaning.")
+    vertex_indices: list[int] = Field(
+        description="Each placed vertex's index in the uploaded file (-1 for the centre of a filled pin-hole)."
+    )
+    template_vertex: list[int] = Field(description="Each placed vertex's nearest template vertex.")
+    position: list[list[float]] = Field(description="Each placed vertex's place on the template's rest pose, metres.")
+    confidence: list[float] = Field(
+        description="Each placed vertex's confidence: the probability of the template patch it was placed in."
+    )
+    mean_confidence: float = Field(description="Area-weighted mean confidence over the part.")
+    region: CorrespondenceRegion
+    template_vertices: int = Field(description="Vertices of the template body the indices refer to.")
+    warnings: list[str] = Field(description="What looks wrong though it was placed (units?).")
+
+
+@router.post(
+    ROUTE,
+    response_model=CorrespondenceResponse,
+    responses={
+        **problem_responses(*UPLOAD_PROBLEMS, 501, slugs=UPLOAD_SLUGS | MODEL_SLUGS | {"correspondence-unavailable"}),
+        200: {"content": {NPZ_MEDIA_TYPE: {}, "application/ply": {}, "application/json": {}}},
+    },
+)
+async def correspondence(
+    request: Request,
+    settings: SettingsDep,
+    models: ModelsDep,
+    file: Annotated[UploadFile, File(description="Mesh or point cloud: " + ", ".join(sorted(ALLOWED_TYPES)))],
+    units: UnitsQuery = "m",
+    scale: ScaleQuery = None,
+    closed: Annotated[bool, Query(description="Point clouds only: the cloud is a closed surface.")] = False,
+    file_type: Annotated[str | None, Query(description="Overrides the upload's extension.")] = None,
+    boundary: Annotated[str | None, Form(description="Point clouds: JSON list of boundary point indices.")] = None,
+    format: Annotated[
+        Literal["json", "npz", "ply"],
+        Query(
+            description="npz: NPY arrays position, confidence, template_vertex, vertex_indices and region; ply: the "
+            "part as the service read it, each vertex coloured by its template place (x, y, z → red, green, blue)."
+        ),
+    ] = "json",
+) -> CorrespondenceResponse | Response:
+    """Each vertex of one partial scan placed on the template body's rest pose, whatever its pose,
+    frame or meshing, with a confidence, and the template region the part covers."""
+    if models.correspondence is None:
+        raise ProblemError(
+            501,
+            "correspondence-unavailable",
+            "Correspondence unavailable",
+            "these models have no correspondence model",
+        )
+    resolved_type = resolve_file_type(file.filename, file_type)
+    data = await file.read()
+    options = upload_options(settings, models.k, units, scale, closed=closed, boundary=boundary)
+    solved: Solved = await request.app.state.solver.solve_with_functions(
+        data, resolved_type, options, vectors=False, descriptors=True
+    )
+    with INFERENCE.labels("correspondence").time():
+        placed = await anyio.to_thread.run_sync(models.correspondence.placed, solved.part)
+    placement, region = placed.placement, placed.region
+    if format == "npz":
+        return Response(
+            _npz(solved, placement, region),
+            media_type=NPZ_MEDIA_TYPE,
+            headers={"content-disposition": "attachment; filename=correspondence.npz"},
+        )
+    if format == "ply":
+        ply = await anyio.to_thread.run_sync(_coloured_part, models, solved, placement)
+        return Response(
+            ply, media_type="application/ply", headers={"content-disposition": "inline; filename=correspondence.ply"}
+        )
+    covered = models.region_of(region)
+    weight = solved.part.mass / solved.part.mass.sum()
+    return CorrespondenceResponse(
+        model_version=models.version,
+        vertices=len(placement.vertex),
+        vertex_indices=solved.sources.tolist(),
+        template_vertex=placement.vertex.tolist(),
+        position=np.round(placement.position, POSITION_DECIMALS).tolist(),
+        confidence=np.round(placement.confidence, CONFIDENCE_DECIMALS).tolist(),
+        mean_confidence=float(weight @ placement.confidence),
+        region=CorrespondenceRegion(
+            vertices=covered.vertices.tolist(),
+            area_fraction=covered.area_fraction,
+            part_coverage=covered.part_coverage,
+        ),
+        template_vertices=len(models.template.vertices),
+        warnings=solved.report.warnings,
+    )
+
+
+def _npz(solved: Solved, placement: Placement, region: np.ndarray) -> bytes:
+    buffer = io.BytesIO()
+    np.savez(
+        buffer,
+        position=placement.position,
+        confidence=placement.confidence,
+        template_vertex=placement.vertex,
+        vertex_indices=solved.sources,
+        region=np.flatnonzero(region),
+    )
+    return buffer.getvalue()
+
+
+def _coloured_part(models: SpectralModels, solved: Solved, placement: Placement) -> bytes:
+    """Binary PLY of the part as read (mesh or points), coloured by its template place scaled
+    to the template's bounding box."""
+    low, high = models.template.vertices.min(axis=0), models.template.vertices.max(axis=0)
+    colour = np.clip((placement.position - low) / (high - low), 0, 1)
+    rgba = np.column_stack([np.round(255 * colour), np.full(len(colour), 255)]).astype(np.uint8)
+    part = solved.part
+    if part.faces is None:
+        return trimesh.PointCloud(part.points, colors=rgba).export(file_type="ply")
+    mesh = trimesh.Trimesh(part.points, part.faces, vertex_colors=rgba, process=False)
+    return mesh.export(file_type="ply")

@@ -1,0 +1,101 @@
+"""What the correspondence network reads of one part: its own eigenbasis, mass, intrinsic
+features and gradient stencils, computed by the engine that computes its spectrum.
+
+Everything here is intrinsic or oriented by the part itself, so neither the file's frame nor
+the body's pose changes it: the eigenbasis is the part's free-boundary (Neumann) Laplacian's
+(its low frequencies are where the network diffuses features), the features are the heat
+kernel signature of that basis, made dimensionless (4πt·HKS(x, t) → 1 on a flat patch as
+t → 0) and logged, plus a flag for the part's boundary (where a scan stops, not where the body
+does), and the stencils take gradients in each vertex's tangent plane with the normal turned
+outward (:mod:`app.geometry.tangent`). Units are metres, as for every spectrum.
+"""
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from app.contract import CORRESPONDENCE_BASIS, CORRESPONDENCE_INPUTS, HKS_TIMES
+from app.geometry.laplacian import Operators, mesh_operators, point_cloud_operators
+from app.geometry.spectrum import eigenpairs
+from app.geometry.tangent import (
+    GradientStencil,
+    cloud_neighbours,
+    cloud_normals,
+    gradient_stencil,
+    mesh_neighbours,
+    outward_faces,
+    vertex_normals,
+)
+from app.geometry.topology import boundary_vertex_mask
+
+FEATURES = len(HKS_TIMES) + 1  # the HKS at each time, and the boundary flag
+
+
+@dataclass(frozen=True)
+class PartInputs:
+    """The correspondence graph's inputs for one part of n vertices (see app.contract)."""
+
+    features: np.ndarray  # (n, FEATURES) float32
+    mass: np.ndarray  # (n,) float32, m²
+    basis: np.ndarray  # (n, k) float32, M-orthonormal
+    eigenvalues: np.ndarray  # (k,) float32, 1/m²
+    stencil: GradientStencil
+    points: np.ndarray | None = None  # (n, 3) where they were computed, metres (to show the part by)
+    faces: np.ndarray | None = None  # (m, 3) a mesh's outward-wound faces; None for a point cloud
+
+    @property
+    def vertices(self) -> int:
+        return len(self.mass)
+
+    def feeds(self) -> dict[str, np.ndarray]:
+        """The graph's inputs by their contract names."""
+        stencil = self.stencil
+        values = (self.features, self.mass, self.basis, self.eigenvalues, stencil.neighbours, stencil.weights)
+        return dict(zip(CORRESPONDENCE_INPUTS, values, strict=True))
+
+
+def mesh_inputs(
+    vertices: np.ndarray, faces: np.ndarray, k: int = CORRESPONDENCE_BASIS, operators: Operators | None = None
+) -> PartInputs:
+    """Inputs of a prepared mesh (``app.geometry.validate.prepare_mesh``), in metres;
+    ``operators``: its Laplacian when the spectrum's solve already built it (winding does not
+    change it)."""
+    faces = outward_faces(vertices, faces)
+    operators = operators or mesh_operators(vertices, faces)
+    stencil = gradient_stencil(
+        vertices, vertex_normals(vertices, faces), mesh_neighbours(faces, len(vertices), vertices)
+    )
+    inputs = _inputs(operators, boundary_vertex_mask(faces, len(vertices)), stencil, k)
+    return replace(inputs, points=vertices, faces=faces)
+
+
+def cloud_inputs(
+    points: np.ndarray, boundary: np.ndarray | None, k: int = CORRESPONDENCE_BASIS, operators: Operators | None = None
+) -> PartInputs:
+    """Inputs of a prepared point cloud, in metres; ``boundary`` flags its boundary points;
+    ``operators``: its Laplacian when the spectrum's solve already built it."""
+    neighbours = cloud_neighbours(points)
+    stencil = gradient_stencil(points, cloud_normals(points, neighbours), neighbours)
+    flags = np.zeros(len(points), bool) if boundary is None else boundary
+    return replace(_inputs(operators or point_cloud_operators(points), flags, stencil, k), points=points)
+
+
+def _inputs(operators: Operators, boundary: np.ndarray, stencil: GradientStencil, k: int) -> PartInputs:
+    k = min(k, operators.mass.shape[0] - 1)
+    values, basis = eigenpairs(operators, k, None, vectors=True)
+    values = np.maximum(values, 0.0)
+    features = np.column_stack([heat_signature(values, basis), boundary.astype(np.float64)])
+    return PartInputs(
+        features.astype(np.float32),
+        operators.mass.diagonal().astype(np.float32),
+        basis.astype(np.float32),
+        values.astype(np.float32),
+        stencil,
+    )
+
+
+def heat_signature(values: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """(n, len(HKS_TIMES)) log(4πt · HKS(x, t)) of the truncated eigenbasis: dimensionless,
+    ~0 where the surface is flat at scale √t, lower on small or curved regions."""
+    heat = (basis**2) @ np.exp(-np.outer(values, HKS_TIMES))  # (n, times), 1/m²
+    return np.log(np.maximum(4 * np.pi * HKS_TIMES * heat, 1e-6))

@@ -1,0 +1,128 @@
+"""The correspondence model as served: an uploaded part's vertices placed on the template, the
+region of the template they reach, and the overlap of two parts read on the template.
+
+Twenty eigenvalues do not say where a part lies or how much two parts overlap; its geometry
+does. The network (:data:`app.contract.CORRESPONDENCE_FILE`, trained by
+``training.correspondence``) places every vertex on the template's rest pose, so two parts
+scanned in different poses, frames or meshings are compared where they lie on one body, with
+no registration. Optional: the service serves everything else without it.
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+from app.contract import CORRESPONDENCE_INPUTS
+from app.geometry.descriptors import PartInputs
+from app.inference.template import RegionBoundaries, Template
+
+# A part's vertices land on template vertices ~1–2 cm apart with gaps where the part is coarser
+# or its places bunch; closing the reached vertices by this edge-path radius (dilate, then erode)
+# fills such gaps without growing the region's outline.
+CLOSING_M = 0.03
+
+
+# Whether a union of uploaded parts is told the overlap and boundary share its parts' regions
+# measure (where the client told none): decided by the measured union error, told against untold,
+# on held-out pairs (models/MODEL_CARD.md, "Correspondence").
+TELL_MEASURED_OVERLAP = True
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where each vertex of a part lies on the template."""
+
+    position: np.ndarray  # (n, 3) rest-pose template coordinates, metres
+    confidence: np.ndarray  # (n,) probability of the template patch it was placed in
+    vertex: np.ndarray  # (n,) the template vertex nearest to its position
+
+
+@dataclass(frozen=True)
+class PlacedPart:
+    """A part placed on the template, and the template region it covers."""
+
+    placement: Placement
+    region: np.ndarray  # (V,) bool
+
+
+class TemplateRegions:
+    """The template's edge graph and areas: regions from placed vertices, and their measures."""
+
+    def __init__(self, template: Template, vertex_area: np.ndarray) -> None:
+        v, f = template.vertices, template.faces
+        edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        length = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
+        graph = sp.csr_matrix((length, (edges[:, 0], edges[:, 1])), shape=(len(v),) * 2)
+        self.graph = graph.maximum(graph.T).tocsr()
+        self.vertex_area = vertex_area
+        self.tree = cKDTree(v)
+        self.boundaries = RegionBoundaries(v, f)
+
+    def nearest(self, positions: np.ndarray) -> np.ndarray:
+        """(n,) the template vertex nearest to each rest-pose position."""
+        return self.tree.query(positions)[1]
+
+    def reached(self, vertices: np.ndarray) -> np.ndarray:
+        """(V,) bool: the template region a part's placed ``vertices`` reach, closed by
+        :data:`CLOSING_M` (dilation then erosion along the template's edges)."""
+        grown = self._within(np.unique(vertices))
+        outside = np.flatnonzero(~grown)
+        return grown & ~self._within(outside) if len(outside) else grown
+
+    def _within(self, sources: np.ndarray) -> np.ndarray:
+        distance = dijkstra(self.graph, indices=sources, min_only=True, limit=CLOSING_M)
+        return np.isfinite(distance)
+
+    def overlap_share(self, a: np.ndarray, b: np.ndarray) -> float:
+        """The share of the smaller region's area inside the other (0 … 1), as the union
+        operator's ``overlap`` means it."""
+        area = self.vertex_area
+        smaller = min(float(area[a].sum()), float(area[b].sum()))
+        return float(area[a & b].sum()) / smaller if smaller > 0 else 0.0
+
+    def fold(self, regions: list[np.ndarray]) -> tuple[list[float], list[float]]:
+        """Each step's overlap share and boundary share along the left fold ((A ∪ B) ∪ C) ∪ …
+        of parts' regions (V,) on the template, as the union operator reads them: the union so
+        far against the next part. ``len(regions) − 1`` of each."""
+        overlaps, boundaries = [], []
+        so_far = regions[0]
+        for region in regions[1:]:
+            overlaps.append(self.overlap_share(so_far, region))
+            boundaries.append(float(self.boundaries.shares(so_far[None], region[None])[0]))
+            so_far = so_far | region
+        return overlaps, boundaries
+
+
+class CorrespondenceModel:
+    """The ONNX correspondence graph and the template it places parts on."""
+
+    def __init__(self, path: Path, regions: TemplateRegions, threads: int = 1) -> None:
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = threads
+        options.inter_op_num_threads = 1
+        self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+        names = tuple(node.name for node in self.session.get_inputs())
+        if names != CORRESPONDENCE_INPUTS:
+            raise ValueError(f"the correspondence graph reads {names}, not {CORRESPONDENCE_INPUTS}")
+        self.regions = regions
+
+    def place(self, inputs: PartInputs) -> Placement:
+        """Each vertex of a part (its inputs from app.geometry.descriptors) on the template."""
+        position, confidence = self.session.run(None, inputs.feeds())
+        if not (np.isfinite(position).all() and np.isfinite(confidence).all()):
+            raise ValueError("the correspondence graph returned non-finite places")
+        position = position.astype(np.float64)
+        return Placement(position, confidence.astype(np.float64), self.regions.nearest(position))
+
+    def region(self, placement: Placement) -> np.ndarray:
+        """(V,) bool: the template region the placed part covers."""
+        return self.regions.reached(placement.vertex)
+
+    def placed(self, inputs: PartInputs) -> PlacedPart:
+        placement = self.place(inputs)
+        return PlacedPart(placement, self.region(placement))

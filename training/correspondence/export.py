@@ -1,0 +1,49 @@
+"""ONNX export of the correspondence network, and its parity with PyTorch.
+
+The graph takes one part (the contract's inputs, :data:`app.contract.CORRESPONDENCE_INPUTS`)
+with its vertex count, stencil width and basis size all dynamic, and applies the gradient
+stencil by gather (the form the service feeds).
+"""
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from app.contract import CORRESPONDENCE_INPUTS, CORRESPONDENCE_OUTPUTS
+from training.correspondence.net import CorrespondenceNet
+from training.learning.export import _export, _relative, session
+
+
+def export_correspondence(model: CorrespondenceNet, example: dict[str, np.ndarray], path: Path) -> None:
+    """Export ``model`` traced on one part's inputs (``example``, by contract name)."""
+    vertices = torch.export.Dim("vertices", min=8, max=1_000_000)
+    width = torch.export.Dim("stencil", min=1, max=64)
+    k = torch.export.Dim("basis", min=2, max=512)
+    shapes = (
+        {0: vertices},
+        {0: vertices},
+        {0: vertices, 1: k},
+        {0: k},
+        {0: vertices, 1: width},
+        {0: vertices, 1: width},
+    )
+    inputs = tuple(torch.as_tensor(example[name]) for name in CORRESPONDENCE_INPUTS)
+    _export(model, inputs, path, CORRESPONDENCE_INPUTS, CORRESPONDENCE_OUTPUTS, shapes)
+
+
+def correspondence_parity(model: CorrespondenceNet, path: Path, parts: list[dict[str, np.ndarray]]) -> float:
+    """Largest difference of the place (relative to the template's extent) and the confidence
+    between onnxruntime and PyTorch's training path (sparse stencil) over ``parts``."""
+    from training.correspondence.net import stencil_matrices
+
+    graph = session(path)
+    worst = 0.0
+    for part in parts:
+        inputs = tuple(torch.as_tensor(part[name]) for name in CORRESPONDENCE_INPUTS)
+        with torch.no_grad():
+            logits = model.eval().logits(*inputs, stencil_matrices(inputs[4], inputs[5]))
+            expected = model.place(logits)
+        got = graph.run(None, {name: part[name] for name in CORRESPONDENCE_INPUTS})
+        worst = max(worst, *(_relative(g, e.numpy()) for g, e in zip(got, expected, strict=True)))
+    return worst
