@@ -5,7 +5,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: run test test-train lint bench dataset train decoder models
+.PHONY: run test test-train lint bench dataset train decoder correspondence models
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -36,7 +36,11 @@ decoder: $(BIN)/.train  ## the shape decoder (spectrum → body): anny bodies, t
 	$(BIN)/spectral-unions-train build-bodies --preset $(or $(PRESET),standard) --out data/bodies-$(or $(PRESET),standard)
 	$(BIN)/spectral-unions-train train-decoder --bodies data/bodies-$(or $(PRESET),standard) --data data/$(or $(PRESET),standard) --union-run runs/$(or $(PRESET),standard)/union.pt --runs runs/$(or $(PRESET),standard) --models models --preset $(or $(PRESET),standard)
 
-models: dataset train decoder  ## everything from scratch: data → training → evaluation → export
+correspondence: $(BIN)/.train  ## the correspondence model (part → template): anny parts and pairs, training, export, evaluation
+	$(BIN)/spectral-unions-train build-parts --preset $(or $(PRESET),standard) --out data/parts-$(or $(PRESET),standard)
+	$(BIN)/spectral-unions-train train-correspondence --parts data/parts-$(or $(PRESET),standard) --runs runs/$(or $(PRESET),standard) --models models --preset $(or $(PRESET),standard)
+
+models: dataset train decoder correspondence  ## everything from scratch: data → training → evaluation → export
 
 lint: $(BIN)/.installed
 	$(BIN)/ruff check app training tests benchmarks

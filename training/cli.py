@@ -156,14 +156,39 @@ def build_parts_command(
     seed: Annotated[int, typer.Option()] = 0,
     workers: Annotated[int | None, typer.Option(help="Local processes (default: all cores).")] = None,
 ) -> None:
-    """Cut anny bodies into parts with known template correspondences (the correspondence model's data)."""
+    """Cut anny bodies into parts and pairs with known template correspondences (the correspondence
+    model's data)."""
     import json
 
+    from training.correspondence.pairs import build_pairs
     from training.correspondence.parts import PARTS_PRESETS, build_parts
 
     if preset not in PARTS_PRESETS:
         raise typer.BadParameter(f"unknown preset {preset!r}")
     typer.echo(json.dumps(build_parts(PARTS_PRESETS[preset], out, seed=seed, workers=workers)))
+    build_pairs(PARTS_PRESETS[preset], out, seed=seed, workers=workers)
+
+
+@cli.command("train-correspondence")
+def train_correspondence_command(
+    parts: Annotated[Path, typer.Option(help="A `build-parts` directory.")] = Path("data/parts-standard"),
+    runs: Annotated[Path, typer.Option(help="Checkpoints (a finished one is reused).")] = Path("runs/standard"),
+    models: ModelsOption = Path("models"),
+    preset: Annotated[str, typer.Option(help="tiny or standard.")] = "standard",
+    seed: Annotated[int, typer.Option()] = 0,
+) -> None:
+    """Train the correspondence model (part → template), export it, evaluate it, write its card section."""
+    import json
+
+    from training.correspondence.pipeline import run_correspondence_pipeline
+    from training.correspondence.train import TRAINING_PRESETS
+
+    if preset not in TRAINING_PRESETS:
+        raise typer.BadParameter(f"unknown preset {preset!r}")
+    command = f"spectral-unions-train train-correspondence --parts {parts} --runs {runs} --models {models}"
+    command += f" --preset {preset} --seed {seed}"
+    metrics = run_correspondence_pipeline(parts, runs, models, preset, seed, command)
+    typer.echo(json.dumps(metrics["pairs"], indent=1))
 
 
 def _pipeline(verb: str, data: Path, runs: Path, models: Path, preset: str, seed: int) -> None:

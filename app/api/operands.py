@@ -84,21 +84,40 @@ BoundaryQuery = Annotated[
 ]
 
 
+RegionsField = Annotated[
+    str | None,
+    Form(
+        description="JSON list of region tokens, one per spectra operand, in order: where on the template each "
+        "spectrum's part lies, as /v1/correspondence (region.token) or /v1/localize (region_token) answered it "
+        "for the part or the union so far. With them the union's region is the union of its operands' regions "
+        "(uploaded files are placed by the correspondence model) and each step's overlap is measured on the "
+        "template, as for uploads alone.",
+        examples=['["region1:AAAA…"]'],
+    ),
+]
+
+
 @dataclass(frozen=True)
 class Told:
     """What a request tells of its union steps: the overlap and boundary shares as sent (text;
-    None where not told), or that they are to be measured from the uploads."""
+    None where not told), that they are to be measured from the uploads, and where its spectra
+    operands lie on the template (region tokens, JSON text)."""
 
     overlap: str | None = None
     boundary: str | None = None
     measure: bool = False
+    regions: str | None = None
 
 
 def told_query(
-    overlap: OverlapQuery = None, boundary: BoundaryQuery = None, measure_overlap: MeasureOverlapQuery = False
+    overlap: OverlapQuery = None,
+    boundary: BoundaryQuery = None,
+    measure_overlap: MeasureOverlapQuery = False,
+    regions: RegionsField = None,
 ) -> Told:
-    """The union routes' three query parameters on what is told of each step, as one."""
-    return Told(overlap, boundary, measure_overlap)
+    """The union routes' query parameters on what is told of each step, and the spectra
+    operands' regions (a form field), as one."""
+    return Told(overlap, boundary, measure_overlap, regions)
 
 
 NOT_TOLD = Told()

@@ -11,12 +11,13 @@ import anyio
 import numpy as np
 from fastapi import Request, UploadFile
 
+from app.api import form_json
 from app.api.metrics import INFERENCE
-from app.api.operands import NOT_TOLD, Operand, Told, parse_shares, resolve_operands
+from app.api.operands import NOT_TOLD, Operand, Told, parse_shares, parse_spectra, resolve_operands
 from app.core.config import Settings
 from app.geometry.overlap import measured_fold
 from app.geometry.plausibility import size_warnings
-from app.inference.correspondence import TELL_MEASURED_OVERLAP, PlacedPart
+from app.inference.correspondence import TELL_MEASURED_OVERLAP, InvalidRegion, PlacedPart, region_from_token
 from app.inference.models import (
     InvalidOverlap,
     SpectralModels,
@@ -44,7 +45,8 @@ class UnionOutcome:
     boundaries: list[float]  # each step's boundary share as told or measured; empty when neither
     overlaps_from: OverlapSource | None  # where they came from
     overlaps_told: bool  # whether the union operator was told them
-    placed: list[PlacedPart] | None  # each operand placed on the template (uploads, correspondence model)
+    placed: list[PlacedPart]  # each uploaded operand placed on the template, when the correspondence model was run
+    regions: list[np.ndarray] | None  # each operand's template region (placed or carried), when every one has one
 
     def fields(self, models: SpectralModels) -> dict:
         """The response fields every union-based endpoint shares."""
@@ -88,7 +90,8 @@ async def union_of_operands(
         checked_overlaps(overlaps, count, models.reads_overlap)
         checked_boundaries(boundaries, overlaps, count, models.reads_boundary)
 
-    places = models.correspondence is not None and bool(files) and not (spectra and spectra.strip())
+    carried = _carried_regions(told.regions, spectra, models)
+    places = models.correspondence is not None and bool(files) and (not (spectra and spectra.strip()) or carried)
     operands, solve_ms = await resolve_operands(
         request,
         settings,
@@ -108,10 +111,13 @@ async def union_of_operands(
         fold = await anyio.to_thread.run_sync(measured_fold, footprints)
         overlaps, boundaries = fold.overlaps, fold.boundaries if models.reads_boundary else None
         source = "footprints"
-    placed = await anyio.to_thread.run_sync(_placed, models, operands) if places else None
+    placed = await anyio.to_thread.run_sync(_placed, models, operands) if places else []
+    regions = [part.region for part in placed] + (carried or [])
+    if len(regions) != len(operands):
+        regions = None  # some operand's place is unknown: the spectral localizer and no measured overlap
     tell = source is not None
-    if placed is not None and source is None and len(placed) > 1:
-        overlaps, boundaries = models.correspondence.regions.fold([part.region for part in placed])
+    if regions is not None and source is None and len(regions) > 1:
+        overlaps, boundaries = models.template_regions.fold(regions)
         source, tell = "correspondence", TELL_MEASURED_OVERLAP and models.reads_overlap
         boundaries = boundaries if models.reads_boundary else None
     started = time.perf_counter()
@@ -123,7 +129,17 @@ async def union_of_operands(
     warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]
     warnings += size_warnings(values, [o.source for o in operands])
     return UnionOutcome(
-        operands, result, solve_ms, seconds * 1e3, warnings, overlaps or [], boundaries or [], source, tell, placed
+        operands,
+        result,
+        solve_ms,
+        seconds * 1e3,
+        warnings,
+        overlaps or [],
+        boundaries or [],
+        source,
+        tell,
+        placed,
+        regions,
     )
 
 
@@ -131,6 +147,19 @@ def _placed(models: SpectralModels, operands: list[Operand]) -> list[PlacedPart]
     """Every uploaded operand placed on the template by the correspondence model (timed)."""
     with INFERENCE.labels("correspondence").time():
         return [models.correspondence.placed(operand.part) for operand in operands]
+
+
+def _carried_regions(text: str | None, spectra: str | None, models: SpectralModels) -> list[np.ndarray] | None:
+    """The ``regions`` form field as one template region per spectra operand (None when not
+    sent); checked before anything is solved."""
+    if text is None:
+        return None
+    tokens = form_json.loads(text, "regions", InvalidRegion)
+    count = len(parse_spectra(spectra, models.k))
+    if not isinstance(tokens, list) or len(tokens) != count:
+        raise InvalidRegion(f"regions must be a JSON list of region tokens, one per spectra operand ({count})")
+    vertices = len(models.template.vertices)
+    return [region_from_token(token, vertices, f"regions[{i}]") for i, token in enumerate(tokens)]
 
 
 def _check_measurable(

@@ -96,6 +96,8 @@ def _inputs(operators: Operators, boundary: np.ndarray, stencil: GradientStencil
 
 def heat_signature(values: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """(n, len(HKS_TIMES)) log(4πt · HKS(x, t)) of the truncated eigenbasis: dimensionless,
-    ~0 where the surface is flat at scale √t, lower on small or curved regions."""
+    ~0 where the surface is flat at scale √t, lower on small or curved regions. Times below
+    ~3/λ_k are cut short by the truncation (on a whole body, the first three): they then read
+    k/area, the part's size, which is information too."""
     heat = (basis**2) @ np.exp(-np.outer(values, HKS_TIMES))  # (n, times), 1/m²
     return np.log(np.maximum(4 * np.pi * HKS_TIMES * heat, 1e-6))

@@ -8,6 +8,8 @@ scanned in different poses, frames or meshings are compared where they lie on on
 no registration. Optional: the service serves everything else without it.
 """
 
+import base64
+import binascii
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +20,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from app.contract import CORRESPONDENCE_INPUTS
+from app.core.errors import InputError
 from app.geometry.descriptors import PartInputs
 from app.inference.template import RegionBoundaries, Template
 
@@ -25,6 +28,39 @@ from app.inference.template import RegionBoundaries, Template
 # or its places bunch; closing the reached vertices by this edge-path radius (dilate, then erode)
 # fills such gaps without growing the region's outline.
 CLOSING_M = 0.03
+
+
+REGION_TOKEN_PREFIX = "region1:"
+
+
+class InvalidRegion(InputError):
+    """A region token that is not one of this template's regions."""
+
+    slug = "invalid-region"
+    title = "Invalid region"
+
+
+def region_token(region: np.ndarray) -> str:
+    """A template region (V,) bool as text a client keeps and sends back (``regions``): its
+    vertices bit-packed, base64 (~2 KB for the 12 167-vertex template)."""
+    return REGION_TOKEN_PREFIX + base64.b64encode(np.packbits(region).tobytes()).decode("ascii")
+
+
+def region_from_token(token: object, vertices: int, name: str) -> np.ndarray:
+    """(vertices,) bool from :func:`region_token`'s text; InvalidRegion naming ``name`` when it
+    is not a token of a template of this many vertices, or holds no vertex."""
+    if not isinstance(token, str) or not token.startswith(REGION_TOKEN_PREFIX):
+        raise InvalidRegion(f"{name} is not a region token (they start with {REGION_TOKEN_PREFIX!r})")
+    try:
+        packed = base64.b64decode(token[len(REGION_TOKEN_PREFIX) :], validate=True)
+    except binascii.Error:
+        raise InvalidRegion(f"{name} is not valid base64") from None
+    if len(packed) != (vertices + 7) // 8:
+        raise InvalidRegion(f"{name} holds {8 * len(packed)} bits, not this template's {vertices} vertices")
+    region = np.unpackbits(np.frombuffer(packed, np.uint8), count=vertices).astype(bool)
+    if not region.any():
+        raise InvalidRegion(f"{name} is an empty region")
+    return region
 
 
 # Whether a union of uploaded parts is told the overlap and boundary share its parts' regions

@@ -181,10 +181,10 @@ class SpectralModels:
             decoded = self.decoder_session.get_outputs()[0].shape
             if self.decoder_session.get_inputs()[0].shape[1] != self.k or decoded[1] != vertex_count:
                 raise ValueError("the shape decoder does not read this k or write this template")
+        self.template_regions = TemplateRegions(self.template, self.vertex_area)
         self.correspondence = None
         if CORRESPONDENCE_FILE in checked:
-            regions = TemplateRegions(self.template, self.vertex_area)
-            self.correspondence = CorrespondenceModel(directory / CORRESPONDENCE_FILE, regions, threads)
+            self.correspondence = CorrespondenceModel(directory / CORRESPONDENCE_FILE, self.template_regions, threads)
         optional = [name for name in (RECONSTRUCTION_FILE, CORRESPONDENCE_FILE) if name in checked]
         served = [UNION_FILE, LOCALIZER_FILE, *optional]
         digest = hashlib.sha256(b"".join((directory / name).read_bytes() for name in served))
@@ -234,14 +234,18 @@ class SpectralModels:
         inside = localized_region(probability[:1], parts_probability, self.vertex_area, self.template.mirror)[0]
         return self.region_of(inside)
 
-    def placed_region(self, placed: Sequence[PlacedPart]) -> tuple[Region, np.ndarray]:
-        """The union of placed parts' regions, and per template vertex in it the confidence of
-        the nearest placed part vertex (a vertex the closing filled takes its neighbour's)."""
-        inside = np.logical_or.reduce([part.region for part in placed])
+    def placed_region(
+        self, regions: Sequence[np.ndarray], placed: Sequence[PlacedPart]
+    ) -> tuple[Region, np.ndarray | None]:
+        """The union of operands' template regions and, when every one was placed here (``placed``
+        holds them all), per template vertex in it the confidence of the nearest placed part
+        vertex (a vertex the closing filled takes its neighbour's); else None."""
+        inside = np.logical_or.reduce(list(regions))
+        if len(placed) != len(regions):
+            return self.region_of(inside), None
         positions = np.concatenate([part.placement.position for part in placed])
         confidence = np.concatenate([part.placement.confidence for part in placed])
-        vertices = np.flatnonzero(inside)
-        _, nearest = cKDTree(positions).query(self.template.vertices[vertices])
+        _, nearest = cKDTree(positions).query(self.template.vertices[inside])
         return self.region_of(inside), confidence[nearest]
 
     def region_of(self, inside: np.ndarray) -> Region:

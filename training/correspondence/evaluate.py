@@ -20,12 +20,18 @@ from pathlib import Path
 
 import numpy as np
 
+from app.contract import CORRESPONDENCE_INPUTS
+from app.geometry.descriptors import PartInputs
+from app.geometry.tangent import GradientStencil
 from app.inference.correspondence import CorrespondenceModel, Placement, TemplateRegions
 from app.inference.models import SpectralModels
 from app.inference.template import Template, part_coverage
+from training.correspondence.pairs import PAIR_SETS, load_pairs
 from training.correspondence.parts import VARIANTS
 from training.correspondence.train import load_parts
 from training.data.spectra import task_spectrum
+from training.learning.baselines import elementwise_min
+from training.learning.spectral_errors import spectral_errors
 
 TEST_SETS = ("test_a", "test_b", "test_c")
 
@@ -118,12 +124,63 @@ def evaluate_correspondence(parts_dir: Path, graph: Path, models: Path) -> dict:
     return table
 
 
-def _inputs(part: dict[str, np.ndarray]):
-    from app.geometry.descriptors import PartInputs
-    from app.geometry.tangent import GradientStencil
+def evaluate_pairs(parts_dir: Path, graph: Path, models: Path) -> dict:
+    """Per pair set and kind: the overlap and boundary share measured from the parts' regions
+    against the truth, the union's error untold / told the measured shares / told the true ones
+    beside the elementwise minimum, and the union's region IoU beside the whole body and the
+    spectral localizer (the union of the localized parts, as /v1/localize answers spectra)."""
+    served = SpectralModels(models)
+    regions = TemplateRegions(served.template, served.vertex_area)
+    model = CorrespondenceModel(graph, regions)
+    n = len(served.template.vertices)
+    area = served.vertex_area
+    table: dict[str, dict] = {}
+    for name in PAIR_SETS:
+        rows: dict[str, list[dict]] = {}
+        for pair in load_pairs(parts_dir, name):
+            a, b, union = (np.unpackbits(pair[f"mask_{s}"], count=n).astype(bool) for s in ("a", "b", "union"))
+            placed = [model.placed(_inputs(pair, side)) for side in ("a_", "b_")]
+            measured, measured_edge = regions.fold([p.region for p in placed])
+            true, true_edge = regions.fold([a, b])
+            spectra = [pair["spectrum_a"], pair["spectrum_b"]]
+            truth = pair["union"][None]
+            untold = served.union(spectra).eigenvalues
+            told = served.union(spectra, measured, measured_edge if served.reads_boundary else None).eigenvalues
+            oracle = served.union(spectra, true, true_edge if served.reads_boundary else None).eigenvalues
+            localized = np.zeros(n, bool)
+            localized[served.localize(untold, spectra).vertices] = True
+            reached = placed[0].region | placed[1].region
+            rows.setdefault(str(pair["kind"]), []).append(
+                {
+                    "overlap_error": abs(measured[0] - true[0]),
+                    "boundary_error": abs(measured_edge[0] - true_edge[0]),
+                    "true_overlap": true[0],
+                    "untold": spectral_errors(untold[None], truth)["mre"],
+                    "told_measured": spectral_errors(told[None], truth)["mre"],
+                    "told_truth": spectral_errors(oracle[None], truth)["mre"],
+                    "elementwise_min": spectral_errors(elementwise_min(*(s[None] for s in spectra)), truth)["mre"],
+                    "iou": iou(reached, union, area),
+                    "iou_mirror": max(iou(reached, union, area), iou(reached[served.template.mirror], union, area)),
+                    "whole_body_iou": float(area[union].sum() / area.sum()),
+                    "localizer_iou_mirror": max(
+                        iou(localized, union, area), iou(localized[served.template.mirror], union, area)
+                    ),
+                }
+            )
+        table[name] = {kind: {"pairs": len(r)} | _means(r) for kind, r in sorted(rows.items())}
+        every = [row for r in rows.values() for row in r]
+        table[name]["all"] = {"pairs": len(every)} | _means(every)
+    return table
 
-    stencil = GradientStencil(part["neighbours"], part["weights"])
-    return PartInputs(part["features"], part["mass"], part["basis"], part["eigenvalues"], stencil)
+
+def _means(rows: list[dict]) -> dict[str, float]:
+    return {key: float(np.mean([row[key] for row in rows])) for key in rows[0]}
+
+
+def _inputs(part: dict[str, np.ndarray], prefix: str = "") -> PartInputs:
+    """Saved inputs (by contract name, under ``prefix``) as the service's PartInputs."""
+    arrays = [part[prefix + name] for name in CORRESPONDENCE_INPUTS]
+    return PartInputs(*arrays[:4], GradientStencil(*arrays[4:]))
 
 
 def _mean(scores: list[PartScore]) -> dict[str, float]:

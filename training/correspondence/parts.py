@@ -64,13 +64,24 @@ class PartsPreset:
     poses: int  # per identity; the last one is held out for test_a
     train_parts: int
     test_parts: int  # per test set and variant
+    test_pairs: int  # draws per pair set (a region pair, or a session's five pairs)
 
 
 PARTS_PRESETS = {
     preset.name: preset
     for preset in (
-        PartsPreset(name="tiny", train_identities=2, test_identities=2, poses=2, train_parts=12, test_parts=2),
-        PartsPreset(name="standard", train_identities=24, test_identities=8, poses=6, train_parts=1800, test_parts=40),
+        PartsPreset(
+            name="tiny", train_identities=2, test_identities=2, poses=2, train_parts=12, test_parts=2, test_pairs=2
+        ),
+        PartsPreset(
+            name="standard",
+            train_identities=24,
+            test_identities=8,
+            poses=6,
+            train_parts=1800,
+            test_parts=40,
+            test_pairs=60,
+        ),
     )
 }
 

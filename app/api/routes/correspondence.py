@@ -17,7 +17,7 @@ from app.api.routes.spectrum import NPZ_MEDIA_TYPE
 from app.api.routes.unions import MODEL_VERSION_FIELD
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
 from app.geometry.pipeline import Solved
-from app.inference.correspondence import Placement
+from app.inference.correspondence import Placement, region_token
 from app.inference.models import SpectralModels
 
 router = APIRouter(tags=["correspondence"])
@@ -30,6 +30,10 @@ class CorrespondenceRegion(BaseModel):
     vertices: list[int] = Field(description="Template vertices the part covers: those its vertices reach, closed.")
     area_fraction: float = Field(description="Share of the template's area covered.")
     part_coverage: dict[str, float] = Field(description="Covered share of each body part's area.")
+    token: str = Field(
+        description="The region as a token: send it in regions beside this part's spectrum, so later unions "
+        "and localizations place the part without uploading it again."
+    )
 
 
 class CorrespondenceResponse(BaseModel):
@@ -118,6 +122,7 @@ async def correspondence(
             vertices=covered.vertices.tolist(),
             area_fraction=covered.area_fraction,
             part_coverage=covered.part_coverage,
+            token=region_token(region),
         ),
         template_vertices=len(models.template.vertices),
         warnings=solved.report.warnings,

@@ -14,6 +14,7 @@ from app.api.metrics import INFERENCE
 from app.api.operands import FilesField, ScaleQuery, SpectraField, UnitsQuery
 from app.api.routes.unions import UNION_PROBLEMS, UnionResponse
 from app.api.unions import union_of_operands
+from app.inference.correspondence import region_token
 from app.inference.template import coloured_template
 
 router = APIRouter(tags=["unions"])
@@ -31,8 +32,14 @@ class LocalizeResponse(UnionResponse):
     )
     vertex_confidence: list[float] | None = Field(
         None,
-        description="With correspondence: per vertex of vertices, the confidence of the nearest placed part "
-        "vertex (the probability of the template patch it was placed in).",
+        description="With correspondence and every operand an uploaded file: per vertex of vertices, the "
+        "confidence of the nearest placed part vertex (the probability of the template patch it was placed in).",
+    )
+    region_token: str | None = Field(
+        None,
+        description="With correspondence: the region as a token to send back in regions beside its union's "
+        "spectrum (the next step of a session), so the next union is localized and its overlap measured on the "
+        "template.",
     )
 
 
@@ -63,8 +70,8 @@ async def localize(
     probabilities expect, grown to hold each operand's own region."""
     outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told)
     confidence = None
-    if outcome.placed is not None:
-        region, confidence = await anyio.to_thread.run_sync(models.placed_region, outcome.placed)
+    if outcome.regions is not None:
+        region, confidence = await anyio.to_thread.run_sync(models.placed_region, outcome.regions, outcome.placed)
     else:
         started = time.perf_counter()
         # A union holds each of its operands' own regions; one operand is its own union.
@@ -82,6 +89,7 @@ async def localize(
         area_fraction=region.area_fraction,
         part_coverage=region.part_coverage,
         template_vertices=len(models.template.vertices),
-        located_by="spectrum" if confidence is None else "correspondence",
+        located_by="spectrum" if outcome.regions is None else "correspondence",
+        region_token=None if outcome.regions is None else region_token(np.logical_or.reduce(outcome.regions)),
         vertex_confidence=None if confidence is None else np.round(confidence, 3).tolist(),
     )

@@ -1,0 +1,144 @@
+"""``POST /v1/correspondence`` and the regions and overlaps the union routes read from it.
+
+The truths: a part cut from the template is its own correspondence (each of its vertices *is* a
+template vertex); an upload's frame, units and winding change nothing the network reads; the
+region of a union is the union of its parts' regions; a service whose models have no
+correspondence graph answers as before (501 here, the spectral localizer there).
+"""
+
+import io
+import json
+import shutil
+
+import numpy as np
+import pytest
+import trimesh
+from fastapi.testclient import TestClient
+from scipy.spatial.transform import Rotation
+
+from app.contract import CORRESPONDENCE_FILE
+from app.core.config import Settings
+from app.inference.manifest import write_manifest
+from app.inference.template import PART_NAMES, Template
+from app.main import create_app
+from app.samples import PARTS, template_part
+from tests.api.conftest import settings_for
+from tests.builders import ascii_ply
+
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
+
+
+@pytest.fixture(scope="module")
+def template() -> Template:
+    return Template.load(Settings().models_dir)
+
+
+@pytest.fixture(scope="module")
+def samples(template) -> dict[str, bytes]:
+    return {name: template_part(template, removed) for name, removed in PARTS.items()}
+
+
+def _correspond(client, name: str, data: bytes, **params):
+    return client.post("/v1/correspondence", params=params, files={"file": (name, data)})
+
+
+def test_a_template_part_is_placed_on_itself(client, samples, template):
+    """Each vertex of a part cut from the template lands near itself, and the region it covers
+    leaves out the body parts it lacks."""
+    name = "no_head_neck.ply"
+    answer = _correspond(client, name, samples[name])
+    assert answer.status_code == 200, answer.text
+    body = answer.json()
+    mesh = trimesh.load(io.BytesIO(samples[name]), file_type="ply", process=False)
+    position = np.array(body["position"])
+    truth = np.asarray(mesh.vertices)[np.array(body["vertex_indices"])]
+    assert len(position) == body["vertices"] == len(body["confidence"]) == len(body["template_vertex"])
+    assert np.median(np.linalg.norm(position - truth, axis=1)) < 0.10
+    assert all(0.0 <= c <= 1.0 for c in body["confidence"])
+    coverage = body["region"]["part_coverage"]
+    assert set(coverage) == set(PART_NAMES)
+    assert coverage["head"] < 0.3 and coverage["hips"] > 0.7 and coverage["torso"] > 0.7
+
+
+def test_frame_units_and_winding_do_not_move_the_places(client, samples):
+    """The part turned, moved, written in centimetres with its faces turned inward is placed
+    where it was: the network reads only intrinsic, outward-oriented inputs."""
+    name = "no_left_forearm_hand.ply"
+    mesh = trimesh.load(io.BytesIO(samples[name]), file_type="ply", process=False)
+    turn = Rotation.from_euler("xyz", [0.3, 2.0, -1.2]).as_matrix()
+    moved = (np.asarray(mesh.vertices) @ turn.T + [0.4, -1.0, 2.0]) * 100.0
+    upload = ascii_ply(moved, np.asarray(mesh.faces)[:, ::-1])
+    before = _correspond(client, name, samples[name]).json()
+    after = _correspond(client, "moved.ply", upload, units="cm").json()
+    assert after["vertex_indices"] == before["vertex_indices"]
+    np.testing.assert_allclose(after["position"], before["position"], atol=2e-3)
+    assert after["region"]["vertices"] == before["region"]["vertices"]
+
+
+def test_npz_and_ply_carry_what_the_json_says(client, samples):
+    name = "no_head_neck.ply"
+    body = _correspond(client, name, samples[name]).json()
+    arrays = np.load(io.BytesIO(_correspond(client, name, samples[name], format="npz").content), allow_pickle=False)
+    np.testing.assert_allclose(arrays["position"], body["position"], atol=1e-4)
+    np.testing.assert_array_equal(arrays["template_vertex"], body["template_vertex"])
+    np.testing.assert_array_equal(arrays["region"], body["region"]["vertices"])
+    ply = _correspond(client, name, samples[name], format="ply")
+    assert ply.headers["content-type"] == "application/ply"
+    coloured = trimesh.load(io.BytesIO(ply.content), file_type="ply", process=False)
+    assert len(coloured.vertices) == body["vertices"]
+
+
+def test_localize_of_uploads_is_the_union_of_their_regions(client, samples):
+    files = [("files", (name, data)) for name, data in samples.items()]
+    answer = client.post("/v1/localize", files=files)
+    assert answer.status_code == 200, answer.text
+    body = answer.json()
+    assert body["located_by"] == "correspondence"
+    assert len(body["vertex_confidence"]) == len(body["vertices"])
+    each = [set(_correspond(client, name, data).json()["region"]["vertices"]) for name, data in samples.items()]
+    assert set(body["vertices"]) == each[0] | each[1]
+    spectra = json.dumps([operand["eigenvalues"] for operand in body["operands"]])
+    by_spectrum = client.post("/v1/localize", data={"spectra": spectra}).json()
+    assert by_spectrum["located_by"] == "spectrum" and by_spectrum["vertex_confidence"] is None
+
+
+def test_union_of_uploads_measures_its_overlap_and_a_told_one_wins(client, samples):
+    files = [("files", (name, data)) for name, data in samples.items()]
+    measured = client.post("/v1/union", files=files).json()
+    assert measured["overlaps_from"] == "correspondence"
+    assert len(measured["overlaps"]) == 1 and 0.0 <= measured["overlaps"][0] <= 1.0
+    told = client.post("/v1/union", files=files, params={"overlap": "0.25"}).json()
+    assert told["overlaps_from"] == "told" and told["overlaps"] == [0.25] and told["overlaps_told"]
+    spectra = json.dumps([operand["eigenvalues"] for operand in measured["operands"]])
+    untold = client.post("/v1/union", data={"spectra": spectra}).json()
+    assert untold["overlaps_from"] is None and untold["overlaps"] == []
+
+
+@pytest.mark.parametrize(
+    ("data", "status"),
+    [
+        (b"", 422),
+        (b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n", 422),
+        (ascii_ply(np.array([[0, 0, 0], [1, 0, 0], [np.nan, 1, 0]]), np.array([[0, 1, 2]])), 422),
+    ],
+)
+def test_bad_uploads_get_a_problem(client, data, status):
+    answer = _correspond(client, "bad.ply", data)
+    assert answer.status_code == status
+    assert answer.headers["content-type"] == "application/problem+json"
+
+
+def test_without_the_graph_the_service_answers_as_before(tmp_path, samples):
+    models = tmp_path / "models"
+    shutil.copytree(Settings().models_dir, models)
+    (models / CORRESPONDENCE_FILE).unlink()
+    write_manifest(models)
+    settings = settings_for(tmp_path / "shapes.sqlite").model_copy(update={"models_dir": models})
+    with TestClient(create_app(settings)) as client:
+        name = "no_head_neck.ply"
+        missing = _correspond(client, name, samples[name])
+        assert missing.status_code == 501
+        assert missing.json()["type"] == "/problems/correspondence-unavailable"
+        files = [("files", (n, d)) for n, d in samples.items()]
+        assert client.post("/v1/localize", files=files).json()["located_by"] == "spectrum"
+        assert client.post("/v1/union", files=files).json()["overlaps_from"] is None
