@@ -20,6 +20,7 @@ import httpx
 
 from app.core.config import Settings
 from app.geometry.overlap import TOKEN_PREFIX
+from app.inference.correspondence import REGION_TOKEN_PREFIX
 from app.inference.template import Template
 from app.samples import sample_overlap, write_samples
 
@@ -44,8 +45,8 @@ def rounded(value):
 
 def shown(value, cut: int = 3) -> str:
     """JSON as the README shows it: rounded, lists over ``cut`` items cut to ``cut`` and "…",
-    part coverage cut to four parts, footprint tokens to their start."""
-    if isinstance(value, str) and value.startswith(TOKEN_PREFIX):
+    part coverage cut to four parts, footprint and region tokens to their start."""
+    if isinstance(value, str) and value.startswith((TOKEN_PREFIX, REGION_TOKEN_PREFIX)):
         return json.dumps(value[:TOKEN_SHOWN] + "…", ensure_ascii=False)
     if isinstance(value, dict):
         items = list(value.items())
@@ -123,9 +124,25 @@ def main() -> None:
             client.post("/v1/overlap", data={"footprints": tokens}),
         )
         recorded["overlap"] = rounded({**measured, "union_footprint": measured["union_footprint"][:TOKEN_SHOWN] + "…"})
+        placed = client.post("/v1/correspondence", files={"file": (PARTS[0], part)}).json()
+        cut = {
+            **placed,
+            "vertex_indices": placed["vertex_indices"][:3],
+            "template_vertex": placed["template_vertex"][:3],
+            "position": placed["position"][:3],
+            "confidence": placed["confidence"][:3],
+            "region": {**placed["region"], "vertices": placed["region"]["vertices"][:5]},
+        }
+        cut["region"]["token"] = cut["region"]["token"][:TOKEN_SHOWN] + "…"
+        recorded["correspondence"] = rounded(cut)
+        show_text(f"curl -s -F file=@{PARTS[0]} {url}/v1/correspondence", shown(cut))
         localized = client.post("/v1/localize", files=files(folder)).json()
-        recorded["localize"] = rounded({**localized, "vertices": localized["vertices"][:5]})
-        region = {k: localized[k] for k in ("vertices", "area_fraction", "part_coverage", "template_vertices")}
+        token = localized["region_token"] and localized["region_token"][:TOKEN_SHOWN] + "…"
+        confidence = localized["vertex_confidence"] and localized["vertex_confidence"][:5]
+        localized = {**localized, "vertices": localized["vertices"][:5], "vertex_confidence": confidence}
+        recorded["localize"] = rounded({**localized, "region_token": token})
+        keys = ("vertices", "area_fraction", "part_coverage", "template_vertices", "located_by")
+        region = {k: localized[k] for k in keys}
         show_text(f"curl -s {both} {url}/v1/localize", "(the union's fields as above, then:)\n" + shown(region))
         ply = client.post("/v1/localize", params={"format": "ply"}, files=files(folder)).content
         header = ply[: ply.index(b"end_header")].decode().strip()

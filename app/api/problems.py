@@ -73,6 +73,7 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
     422: [
         ("invalid-spectrum", "Invalid spectrum", "spectra[1] is not in ascending order"),
         ("invalid-overlap", "Invalid overlap", "2 overlaps for 2 operands: give one per union step (1)"),
+        ("invalid-region", "Invalid region", "regions[0] holds 1528 bits, not this template's 12167 vertices"),
         ("invalid-geometry", "Invalid geometry", "files[0] scan.ply: 1 vertices have NaN or infinite coordinates"),
         ("invalid-request", "Invalid request", "query.top: Input should be less than or equal to 100"),
         (
@@ -92,7 +93,10 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
             "files[0] scan.ply: the solve needed more memory than a solver worker may use",
         ),
     ],
-    501: [("reconstruction-unavailable", "Reconstruction unavailable", "these models have no shape decoder")],
+    501: [
+        ("reconstruction-unavailable", "Reconstruction unavailable", "these models have no shape decoder"),
+        ("correspondence-unavailable", "Correspondence unavailable", "these models have no correspondence model"),
+    ],
     503: [
         (
             "not-ready",
@@ -132,7 +136,9 @@ UPLOAD_SLUGS = frozenset(
         "upload-storage-full",
     }
 )
-MODEL_SLUGS = frozenset({"invalid-spectrum", "invalid-overlap", "models-unavailable"})  # routes that run the models
+MODEL_SLUGS = frozenset(
+    {"invalid-spectrum", "invalid-overlap", "invalid-region", "models-unavailable"}
+)  # routes that run the models
 DATABASE_SLUGS = frozenset({"database-unavailable"})  # routes that read or write the store
 
 

@@ -91,6 +91,8 @@ async def union_of_operands(
         checked_boundaries(boundaries, overlaps, count, models.reads_boundary)
 
     carried = _carried_regions(told.regions, spectra, models)
+    if carried is not None and files and models.correspondence is None:
+        raise InvalidRegion("these models cannot place uploaded files: send regions with spectra operands only")
     places = models.correspondence is not None and bool(files) and (not (spectra and spectra.strip()) or carried)
     operands, solve_ms = await resolve_operands(
         request,

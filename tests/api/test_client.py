@@ -32,11 +32,14 @@ def test_a_spectrum_is_the_pipelines(service):
 
 
 def test_a_union_of_files_equals_the_union_of_their_spectra_in_either_order(service, scans):
+    """Files are united told the overlap their places on the template measure; their spectra
+    told the same, in either order, give the same union."""
     by_files = service.union(files=scans)
     spectra = [operand.eigenvalues for operand in by_files.operands]
-    by_spectra = service.union(spectra=spectra[::-1])
+    told = {"overlap": by_files.overlaps, "boundary": by_files.boundaries or None}
+    by_spectra = service.union(spectra=spectra[::-1], **told)
     np.testing.assert_allclose(by_spectra.eigenvalues, by_files.eigenvalues, rtol=1e-6)
-    mixed = service.union(files=scans[:1], spectra=spectra[1:])
+    mixed = service.union(files=scans[:1], spectra=spectra[1:], **told)
     np.testing.assert_allclose(mixed.eigenvalues, by_files.eigenvalues, rtol=1e-6)
     assert [o.source for o in mixed.operands] == ["files[0] patch1.ply", "spectra[0]"]
     assert np.all(np.asarray(by_files.lower) <= by_files.eigenvalues)

@@ -142,3 +142,39 @@ def test_without_the_graph_the_service_answers_as_before(tmp_path, samples):
         files = [("files", (n, d)) for n, d in samples.items()]
         assert client.post("/v1/localize", files=files).json()["located_by"] == "spectrum"
         assert client.post("/v1/union", files=files).json()["overlaps_from"] is None
+
+
+def test_spectra_sent_with_their_regions_are_placed_as_their_uploads(client, samples):
+    """A session's parts sent back as spectra with the region tokens /v1/correspondence gave are
+    localized and united exactly as the uploads are."""
+    placed = [_correspond(client, name, data).json() for name, data in samples.items()]
+    form = {
+        "spectra": json.dumps([part["eigenvalues"] for part in placed]),
+        "regions": json.dumps([part["region"]["token"] for part in placed]),
+    }
+    files = [("files", (name, data)) for name, data in samples.items()]
+    by_files = client.post("/v1/localize", files=files).json()
+    by_spectra = client.post("/v1/localize", data=form).json()
+    assert by_spectra["located_by"] == "correspondence" and by_spectra["vertices"] == by_files["vertices"]
+    assert by_spectra["overlaps"] == pytest.approx(by_files["overlaps"])
+    np.testing.assert_allclose(by_spectra["eigenvalues"], by_files["eigenvalues"], rtol=1e-6)
+    assert by_spectra["vertex_confidence"] is None  # no part was placed in this request
+    chained = {"spectra": json.dumps([by_spectra["eigenvalues"]]), "regions": json.dumps([by_spectra["region_token"]])}
+    assert client.post("/v1/localize", data=chained).json()["vertices"] == by_files["vertices"]
+
+
+@pytest.mark.parametrize(
+    ("regions", "detail"),
+    [
+        ("not json", "regions"),
+        ('["region1:AAAA"]', "regions[0]"),
+        ('["fp1.AAAA"]', "regions[0]"),
+        ('["region1:!!!"]', "regions[0]"),
+        ("[]", "one per spectra operand"),
+    ],
+)
+def test_bad_regions_get_a_problem_naming_them(client, regions, detail):
+    form = {"spectra": json.dumps([[1.0 + i for i in range(20)]]), "regions": regions}
+    answer = client.post("/v1/localize", data=form)
+    assert answer.status_code == 422
+    assert answer.json()["type"] == "/problems/invalid-region" and detail in answer.json()["detail"]

@@ -92,6 +92,7 @@ def test_documented_error_examples_are_the_messages_the_service_sends(tmp_path):
 
 
 def test_every_json_answer_has_a_success_example_that_its_model_accepts():
+    from app.api.routes.correspondence import CorrespondenceResponse
     from app.api.routes.localize import LocalizeResponse
     from app.api.routes.models import ModelsResponse
     from app.api.routes.overlap import OverlapResponse
@@ -104,6 +105,7 @@ def test_every_json_answer_has_a_success_example_that_its_model_accepts():
     models = {
         ("post", "/v1/spectrum", "200"): SpectrumReport,
         ("post", "/v1/union", "200"): UnionResponse,
+        ("post", "/v1/correspondence", "200"): CorrespondenceResponse,
         ("post", "/v1/overlap", "200"): OverlapResponse,
         ("post", "/v1/localize", "200"): LocalizeResponse,
         ("post", "/v1/reconstruct", "200"): ReconstructResponse,

@@ -86,18 +86,22 @@ def browser():
     driver.quit()
 
 
-def _session_spectra(base: str, scans: list[Path]) -> str:
-    """Each part's spectrum as the API computes it, as a ``spectra`` form field."""
-    spectra = [
-        httpx.post(f"{base}/v1/spectrum", files={"file": (p.name, p.read_bytes())}, timeout=60).json()["eigenvalues"]
+def _session_form(base: str, scans: list[Path]) -> dict[str, str]:
+    """The union routes' form for the session as the page sends it: each part placed on the
+    template by /v1/correspondence, their spectra with their regions."""
+    placed = [
+        httpx.post(f"{base}/v1/correspondence", files={"file": (p.name, p.read_bytes())}, timeout=60).json()
         for p in scans
     ]
-    return json.dumps(spectra)
+    return {
+        "spectra": json.dumps([part["eigenvalues"] for part in placed]),
+        "regions": json.dumps([part["region"]["token"] for part in placed]),
+    }
 
 
 def _expected_region(base: str, scans: list[Path]) -> dict:
     """What the API says of the same session's union, asked directly."""
-    return httpx.post(f"{base}/v1/localize", data={"spectra": _session_spectra(base, scans)}, timeout=60).json()
+    return httpx.post(f"{base}/v1/localize", data=_session_form(base, scans), timeout=60).json()
 
 
 def _drawn_share(element) -> float:
@@ -133,6 +137,8 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
         item.get_attribute("data-part"): float(item.get_attribute("data-coverage"))
         for item in browser.find_elements(By.CSS_SELECTOR, "#coverage li")
     }
+    assert expected["located_by"] == "correspondence"
+    assert browser.find_element(By.TAG_NAME, "body").get_attribute("data-located") == "correspondence"
     assert shown.keys() == expected["part_coverage"].keys()
     for part, share in expected["part_coverage"].items():
         assert shown[part] == pytest.approx(share, abs=1e-4), part
@@ -151,9 +157,7 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
     greyish = ((np.ptp(pixels, axis=1) < 12) & (pixels[:, 0] < 225) & (pixels[:, 0] > 60)).mean()
     assert reddish > 0.02 and greyish > 0.001  # covered and missing, in their two colours
     assert len(browser.find_elements(By.CSS_SELECTOR, "#matches li")) == 5
-    found = httpx.post(
-        f"{base}/v1/retrieve", params={"top": 5}, data={"spectra": _session_spectra(base, scans)}, timeout=60
-    )
+    found = httpx.post(f"{base}/v1/retrieve", params={"top": 5}, data=_session_form(base, scans), timeout=60)
     items = [item.text for item in browser.find_elements(By.CSS_SELECTOR, "#matches li")]
     assert [item.split(" (")[0] for item in items] == [match["label"] for match in found.json()["matches"]]
     for item, match in zip(items, found.json()["matches"], strict=True):  # the share a profile ranked it under
@@ -164,7 +168,7 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
     assert matches_note.text.startswith(" ".join(found.json()["warnings"]))
     assert ("explains it best" in matches_note.text) == (found.json()["ranked_by"] == "share_profile")
     rebuilt = httpx.post(
-        f"{base}/v1/reconstruct", params={"format": "ply"}, data={"spectra": _session_spectra(base, scans)}, timeout=60
+        f"{base}/v1/reconstruct", params={"format": "ply"}, data=_session_form(base, scans), timeout=60
     )
     note = browser.find_element(By.ID, "rebuilt-note")
     assert note.get_attribute("data-height") == f"{float(rebuilt.headers['x-height-m']):.4f}"

@@ -91,7 +91,9 @@ def test_a_wide_one_ring_is_cut_to_its_nearest_members():
     count = 40
     angle = 2 * np.pi * np.arange(count) / count
     radius = 1.0 + 0.5 * (np.arange(count) % 2)
-    vertices = np.vstack([[0, 0, 0], np.column_stack([radius * np.cos(angle), radius * np.sin(angle), np.zeros(count)])])
+    vertices = np.vstack(
+        [[0, 0, 0], np.column_stack([radius * np.cos(angle), radius * np.sin(angle), np.zeros(count)])]
+    )
     faces = np.column_stack([np.zeros(count, int), 1 + np.arange(count), 1 + (np.arange(count) + 1) % count])
     table = mesh_neighbours(faces, len(vertices), vertices)
     assert table.shape[1] == 12

@@ -42,8 +42,7 @@ def correspondence_parity(model: CorrespondenceNet, path: Path, parts: list[dict
     for part in parts:
         inputs = tuple(torch.as_tensor(part[name]) for name in CORRESPONDENCE_INPUTS)
         with torch.no_grad():
-            logits = model.eval().logits(*inputs, stencil_matrices(inputs[4], inputs[5]))
-            expected = model.place(logits)
+            expected = model.place(model.eval().heads(*inputs, stencil_matrices(inputs[4], inputs[5])))
         got = graph.run(None, {name: part[name] for name in CORRESPONDENCE_INPUTS})
         worst = max(worst, *(_relative(g, e.numpy()) for g, e in zip(got, expected, strict=True)))
     return worst

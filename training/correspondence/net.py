@@ -13,8 +13,9 @@ metres (:mod:`app.geometry.descriptors`), so neither frame nor pose changes them
 The head classifies each vertex into one of the template's patches (farthest-point samples of
 the rest pose, each vertex with its nearest by edge path): a classification keeps its regions
 where an uncertain regression shrinks toward the body's centroid. The place is then the
-probability-weighted centre of the patches near the most probable one, so it moves smoothly
-within a patch and never averages a left hand with a right one.
+probability-weighted centre of the patches near the most probable one (it never averages a
+left hand with a right one), moved by a learned offset of at most about a patch's radius: a
+confident vertex would otherwise land on its patch's centre, and a part's places bunch.
 """
 
 from dataclasses import asdict, dataclass
@@ -36,6 +37,7 @@ class CorrespondenceConfig:
     blocks: int = 4  # the paper's default
     patches: int = 384  # ~47 cm² each on an adult: ~3.5 cm across
     neighbourhood_m: float = 0.08  # patches averaged into the place: within 8 cm of the most probable
+    offset_m: float = 0.05  # the place's learned offset from the patches' weighted centre, at most (~a patch's radius)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -77,6 +79,13 @@ class DiffusionBlock(nn.Module):
         return x + self.mlp(torch.cat([x, diffused, gradient], dim=1))
 
 
+class Heads(NamedTuple):
+    """What the network says of each vertex: (n, patches) patch scores, (n, 3) offset in metres."""
+
+    logits: torch.Tensor
+    offset: torch.Tensor
+
+
 class CorrespondenceNet(nn.Module):
     """A part's inputs (app.contract's names) → each vertex's template place and confidence."""
 
@@ -86,28 +95,31 @@ class CorrespondenceNet(nn.Module):
         self.first = nn.Linear(config.features, config.width)
         self.blocks = nn.ModuleList(DiffusionBlock(config.width) for _ in range(config.blocks))
         self.head = nn.Linear(config.width, config.patches)
+        self.offset = nn.Linear(config.width, 3)
         distance = np.linalg.norm(centres[:, None] - centres[None], axis=2)
         self.register_buffer("centres", torch.as_tensor(centres, dtype=torch.float32))
         self.register_buffer("near", torch.as_tensor(distance <= config.neighbourhood_m, dtype=torch.float32))
 
-    def logits(self, features, mass, basis, eigenvalues, neighbours, weights, stencil=None) -> torch.Tensor:
-        """(n, patches) unnormalized patch scores of each vertex; ``stencil``: the gradient
-        stencil as sparse matrices (:func:`stencil_matrices`), for training."""
+    def heads(self, features, mass, basis, eigenvalues, neighbours, weights, stencil=None) -> Heads:
+        """Each vertex's patch scores and offset; ``stencil``: the gradient stencil as sparse
+        matrices (:func:`stencil_matrices`), for training."""
         x = self.first(features)
         for block in self.blocks:
             x = block(x, mass, basis, eigenvalues, neighbours, weights, stencil)
-        return self.head(x)
+        return Heads(self.head(x), self.config.offset_m * torch.tanh(self.offset(x)))
 
-    def place(self, logits: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(n, 3) place on the template and (n,) confidence from the patch scores."""
-        probability = torch.softmax(logits, dim=1)
+    def place(self, heads: Heads) -> tuple[torch.Tensor, torch.Tensor]:
+        """(n, 3) place on the template and (n,) confidence: the probability-weighted centre of
+        the patches near the most probable one, moved by the learned offset. Without the offset
+        a confident vertex lands on its patch's centre, and a part's places bunch ~4 cm apart."""
+        probability = torch.softmax(heads.logits, dim=1)
         confidence, best = probability.max(dim=1)
         local = probability * self.near[best]
         position = (local @ self.centres) / local.sum(dim=1, keepdim=True)
-        return position, confidence
+        return position + heads.offset, confidence
 
     def forward(self, features, mass, basis, eigenvalues, neighbours, weights):
-        return self.place(self.logits(features, mass, basis, eigenvalues, neighbours, weights))
+        return self.place(self.heads(features, mass, basis, eigenvalues, neighbours, weights))
 
 
 class StencilMatrices(NamedTuple):

@@ -143,6 +143,7 @@ def plan_parts(preset: PartsPreset, seed: int) -> list[Plan]:
         plans.append(
             Plan("train", index, int(rng.choice(train_bodies)), cut, variant, bool(rng.random() < NOISE_SHARE))
         )
+    rng = np.random.default_rng([seed, 0xC0 + 3])  # the test sets' own stream: the same whatever is trained on
     tests = (("test_a", held_out, None), ("test_b", unseen, "region"), ("test_c", unseen, "camera"))
     for name, bodies, only in tests:
         index = 0

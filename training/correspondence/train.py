@@ -33,7 +33,7 @@ TRAINING_PRESETS = {
     preset.name: preset
     for preset in (
         TrainingPreset(name="tiny", steps=30, config=CorrespondenceConfig(width=16, blocks=2, patches=64)),
-        TrainingPreset(name="standard", steps=12_000),
+        TrainingPreset(name="standard", steps=24_000),
     )
 }
 
@@ -77,9 +77,10 @@ def train(parts_dir: Path, run: Path, preset: TrainingPreset, seed: int = 0, log
         target = torch.as_tensor(part["target"])
         area = torch.as_tensor(part["mass"])
         area = area / area.sum()
-        logits = model.logits(*inputs_of[chosen], stencils[chosen])
-        position, _ = model.place(logits)
-        classification = (torch.nn.functional.cross_entropy(logits, patch_of[target], reduction="none") * area).sum()
+        heads = model.heads(*inputs_of[chosen], stencils[chosen])
+        position, _ = model.place(heads)
+        scores = heads.logits
+        classification = (torch.nn.functional.cross_entropy(scores, patch_of[target], reduction="none") * area).sum()
         place = (torch.linalg.norm(position - rest[target], dim=1) * area).sum()
         loss = classification + PLACE_WEIGHT * place
         optimizer.zero_grad()

@@ -10,6 +10,7 @@ from fastapi import APIRouter, File, Form, Query, Request, Response, UploadFile
 from pydantic import BaseModel, Field
 
 from app.api.deps import ModelsDep, SettingsDep
+from app.api.examples import success
 from app.api.metrics import INFERENCE
 from app.api.operands import ScaleQuery, UnitsQuery, upload_options
 from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, ProblemError, problem_responses
@@ -38,6 +39,10 @@ class CorrespondenceRegion(BaseModel):
 
 class CorrespondenceResponse(BaseModel):
     model_version: str = MODEL_VERSION_FIELD
+    eigenvalues: list[float] = Field(
+        description="The part's spectrum from the same solve (as /v1/spectrum answers it, k of the models): send it "
+        "as a spectra operand with region.token in regions."
+    )
     vertices: int = Field(description="Vertices (or points) placed: the upload's, after the service's cleaning.")
     vertex_indices: list[int] = Field(
         description="Each placed vertex's index in the uploaded file (-1 for the centre of a filled pin-hole)."
@@ -48,7 +53,7 @@ class CorrespondenceResponse(BaseModel):
         description="Each placed vertex's confidence: the probability of the template patch it was placed in."
     )
     mean_confidence: float = Field(description="Area-weighted mean confidence over the part.")
-    region: CorrespondenceRegion
+    region: CorrespondenceRegion = Field(description="The template region the part covers.")
     template_vertices: int = Field(description="Vertices of the template body the indices refer to.")
     warnings: list[str] = Field(description="What looks wrong though it was placed (units?).")
 
@@ -58,7 +63,7 @@ class CorrespondenceResponse(BaseModel):
     response_model=CorrespondenceResponse,
     responses={
         **problem_responses(*UPLOAD_PROBLEMS, 501, slugs=UPLOAD_SLUGS | MODEL_SLUGS | {"correspondence-unavailable"}),
-        200: {"content": {NPZ_MEDIA_TYPE: {}, "application/ply": {}, "application/json": {}}},
+        200: {"content": {NPZ_MEDIA_TYPE: {}, "application/ply": {}, **success("correspondence")[200]["content"]}},
     },
 )
 async def correspondence(
@@ -112,6 +117,7 @@ async def correspondence(
     weight = solved.part.mass / solved.part.mass.sum()
     return CorrespondenceResponse(
         model_version=models.version,
+        eigenvalues=solved.report.eigenvalues,
         vertices=len(placement.vertex),
         vertex_indices=solved.sources.tolist(),
         template_vertex=placement.vertex.tolist(),

@@ -35,6 +35,10 @@ class ModelsResponse(BaseModel):
         description="What the union operator reads besides the operands' spectra where a caller tells it (the "
         "union routes' query parameters of these names): overlap, boundary; empty when it reads neither."
     )
+    correspondence: bool = Field(
+        description="Whether uploaded parts are placed on the template (POST /v1/correspondence; regions and "
+        "overlaps of uploads measured on the template)."
+    )
     database: DatabaseInfo = Field(description="The ShapeDNA database's backend and size.")
 
 
@@ -60,5 +64,6 @@ async def models_info(request: Request, models: ModelsDep) -> ModelsResponse:
         template_vertices=len(models.template.vertices),
         parts=list(PART_NAMES),
         told=[name for name, read in (("overlap", models.reads_overlap), ("boundary", models.reads_boundary)) if read],
+        correspondence=models.correspondence is not None,
         database=database,
     )

@@ -10,7 +10,7 @@ import * as THREE from "three";
 import { OrbitControls } from "/static/vendor/three/OrbitControls.js";
 import { PLYLoader } from "/static/vendor/three/PLYLoader.js";
 
-const parts = []; // {name, eigenvalues, warnings, overlap, boundary (registered scans after the first)}
+const parts = []; // {name, eigenvalues, warnings, overlap, boundary (registered scans after the first), region}
 let unionFootprint = null; // registered scans: the footprint token of the union so far
 const $ = (id) => document.getElementById(id);
 const SVG = "http://www.w3.org/2000/svg";
@@ -20,17 +20,21 @@ function setStatus(text, problem = false) {
   $("status").classList.toggle("problem", problem);
 }
 
+// Every part's spectrum, and where each lies on the template when every part was placed there
+// (its region token from /v1/correspondence): the union is then localized, and each step's
+// overlap measured, on the template.
 function spectraForm() {
   const form = new FormData();
   form.append("spectra", JSON.stringify(parts.map((part) => part.eigenvalues)));
+  if (parts.every((part) => part.region)) form.append("regions", JSON.stringify(parts.map((part) => part.region)));
   return form;
 }
 
-// What the served union operator can be told (GET /v1/models' "told"): a model set that reads
-// no boundary share answers 422 to one, so the page sends only what the models read.
-const toldInputs = fetch("/v1/models")
-  .then(answer)
-  .then((models) => new Set(models.told));
+// What the served models do (GET /v1/models): what the union operator can be told (a model set
+// that reads no boundary share answers 422 to one, so the page sends only what the models read),
+// and whether uploaded parts are placed on the template.
+const served = fetch("/v1/models").then(answer);
+const toldInputs = served.then((models) => new Set(models.told));
 
 // The union routes' query: the overlaps and boundary shares measured so far (one per union
 // step), when registered, each only if the models read it.
@@ -71,11 +75,16 @@ async function addScan(file) {
   form.append("file", file, file.name);
   const registered = $("registered").checked;
   try {
-    const whole = $("whole").checked ? "&cap_holes=true" : "";
-    const query = `units=${$("units").value}${registered ? "&footprint=true" : ""}${whole}`;
-    const report = await answer(await fetch(`/v1/spectrum?${query}`, { method: "POST", body: form }));
+    const whole = $("whole").checked;
+    // A partial scan is placed on the template (one solve gives its spectrum and its region);
+    // registered scans are measured by their footprints, whole-body scans capped.
+    const placed = (await served).correspondence && !registered && !whole;
+    const query = `units=${$("units").value}${registered ? "&footprint=true" : ""}${whole ? "&cap_holes=true" : ""}`;
+    const route = placed ? "/v1/correspondence" : "/v1/spectrum";
+    const report = await answer(await fetch(`${route}?${query}`, { method: "POST", body: form }));
     const { overlap, boundary, union } = registered ? await measured(report.footprint) : {};
-    parts.push({ name: file.name, eigenvalues: report.eigenvalues, warnings: report.warnings, overlap, boundary });
+    const region = placed ? report.region.token : undefined;
+    parts.push({ name: file.name, eigenvalues: report.eigenvalues, warnings: report.warnings, overlap, boundary, region });
     if (registered) unionFootprint = union;
     $("registered").disabled = true; // one kind of session: every scan registered, or none
     await refresh();
@@ -113,6 +122,10 @@ async function refresh() {
   plot(region);
   covered.show(ply);
   showCoverage(region);
+  $("located").textContent = region.located_by === "correspondence"
+    ? "Coverage from where each scan's vertices lie on the template (correspondence)."
+    : "Coverage read from the union's spectrum: the region may be the mirror image of the scanned one.";
+  document.body.dataset.located = region.located_by;
   showMatches(found);
   await showRebuilt(rebuilt);
   document.body.dataset.parts = String(parts.length); // what the browser test waits for

@@ -1,0 +1,75 @@
+"""What placing one uploaded part on the template costs, stage by stage, beside LaPy's eigenbasis.
+
+Run: ``python benchmarks/bench_correspondence.py`` (needs ``pip install -e '.[train,dev]'`` for
+LaPy and cholespy, and ``models/correspondence.onnx``). Prints, as a Markdown table, the median
+milliseconds (stages taking turns within every repeat) on the README's two sample parts (~9 k
+and ~11 k vertices) and a ~10 k-point cloud of the second: the Laplacian, the part's spectrum
+(k = 20, Dirichlet: what every upload already costs), the correspondence inputs (the k = 64
+free-boundary eigenbasis, the heat signature, outward winding and gradient stencil), the ONNX
+graph on one thread and on two, and the region; beside LaPy with CHOLMOD solving the same
+64 eigenpairs (its strongest configuration), as the peer of the eigenbasis stage.
+"""
+
+import argparse
+
+import lapy
+import numpy as np
+import trimesh
+
+from app.contract import CORRESPONDENCE_BASIS, CORRESPONDENCE_FILE
+from app.core.config import Settings
+from app.geometry.descriptors import cloud_inputs, mesh_inputs
+from app.geometry.laplacian import mesh_operators
+from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
+from app.geometry.shapes import Mesh
+from app.inference.correspondence import CorrespondenceModel
+from app.inference.models import SpectralModels
+from app.samples import PARTS, template_part
+from benchmarks.bench_spectrum import interleaved_ms
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=9)
+    args = parser.parse_args()
+    directory = Settings().models_dir
+    models = SpectralModels(directory)
+    one, two = (CorrespondenceModel(directory / CORRESPONDENCE_FILE, models.template_regions, t) for t in (1, 2))
+    print(
+        "| part | vertices | Laplacian | spectrum k = 20 | inputs (k = 64 basis) | graph, 1 / 2 threads | region "
+        "| LaPy-CHOLMOD 64 eigenpairs |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
+    for name, removed in PARTS.items():
+        mesh = trimesh.load(trimesh.util.wrap_as_stream(template_part(models.template, removed)), file_type="ply")
+        vertices, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+        _row(name, vertices, faces, one, two, args.repeats)
+    _row("point cloud of " + name, vertices, None, one, two, args.repeats)
+
+
+def _row(name: str, vertices: np.ndarray, faces: np.ndarray | None, one, two, repeats: int) -> None:
+    if faces is None:
+        inputs = cloud_inputs(vertices, None)
+        runs = {"inputs": lambda: cloud_inputs(vertices, None)}
+    else:
+        inputs = mesh_inputs(vertices, faces)
+        solver = lapy.Solver(lapy.TriaMesh(vertices, faces), use_cholmod=True)
+        runs = {
+            "laplacian": lambda: mesh_operators(vertices, faces),
+            "spectrum": lambda: mesh_spectrum(Mesh(vertices, faces), SpectrumOptions(k=20)),
+            "inputs": lambda: mesh_inputs(vertices, faces),
+            "lapy": lambda: solver.eigs(k=CORRESPONDENCE_BASIS),
+        }
+    placement = one.place(inputs)
+    runs |= {"graph1": lambda: one.place(inputs), "graph2": lambda: two.place(inputs)}
+    runs["region"] = lambda: one.region(placement)
+    ms = interleaved_ms(runs, repeats)
+    cell = lambda key: f"{ms[key]:.0f}" if key in ms else "—"  # noqa: E731
+    print(
+        f"| {name} | {inputs.vertices} | {cell('laplacian')} | {cell('spectrum')} | {cell('inputs')} | "
+        f"{cell('graph1')} / {cell('graph2')} | {cell('region')} | {cell('lapy')} |"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,57 @@
+"""The served correspondence graph: any part size, basis size and stencil width; places that
+come back finite, within the template, and for a part cut from the template, near themselves."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.contract import CORRESPONDENCE_FILE
+from app.geometry.descriptors import cloud_inputs, mesh_inputs
+from app.geometry.topology import drop_unreferenced
+from app.inference.models import SpectralModels
+from app.inference.template import PART_NAMES, faces_inside
+from tests.conftest import sphere
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+pytestmark = pytest.mark.skipif(not (MODELS / CORRESPONDENCE_FILE).exists(), reason="no correspondence graph")
+
+
+@pytest.fixture(scope="module")
+def models() -> SpectralModels:
+    return SpectralModels(MODELS)
+
+
+def _template_part(models: SpectralModels, kept: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The template's faces inside the given body parts: (vertices, faces, each vertex's template index)."""
+    template = models.template
+    mask = np.isin(template.labels, [PART_NAMES.index(name) for name in kept])
+    faces = template.faces[faces_inside(mask, template.faces)]
+    used = np.zeros(len(mask), bool)
+    used[faces.ravel()] = True
+    vertices, faces = drop_unreferenced(template.vertices, faces)
+    return vertices, faces, np.flatnonzero(used)
+
+
+@pytest.mark.parametrize("subdivisions", [1, 3])
+def test_small_parts_and_short_bases_are_placed(models, subdivisions):
+    """A 42-vertex sphere has a basis of 41 and a stencil 5–6 wide: the graph takes both."""
+    mesh = sphere(subdivisions)
+    inputs = mesh_inputs(0.1 * mesh.vertices, mesh.faces)
+    placement = models.correspondence.place(inputs)
+    assert placement.position.shape == (len(mesh.vertices), 3)
+    assert np.isfinite(placement.position).all() and ((0 <= placement.confidence) & (placement.confidence <= 1)).all()
+    low, high = models.template.vertices.min(axis=0), models.template.vertices.max(axis=0)
+    assert np.all((placement.position >= low - 0.1) & (placement.position <= high + 0.1))
+
+
+def test_a_template_part_lands_near_itself_mesh_or_cloud(models):
+    """The torso, hips and thighs cut from the template: most of their vertices land within 10 cm of
+    themselves, as a mesh and as a point cloud, and the region holds the torso, not the head."""
+    vertices, faces, index = _template_part(models, ["torso", "hips", "left_thigh", "right_thigh"])
+    truth = models.template.vertices[index]
+    for inputs in (mesh_inputs(vertices, faces), cloud_inputs(vertices, None)):
+        placement = models.correspondence.place(inputs)
+        assert np.mean(np.linalg.norm(placement.position - truth, axis=1) < 0.10) > 0.8
+    region = models.region_of(models.correspondence.region(models.correspondence.place(mesh_inputs(vertices, faces))))
+    assert region.part_coverage["torso"] > 0.7 and region.part_coverage["head"] < 0.2
