@@ -17,7 +17,7 @@ from app.api.operands import NOT_TOLD, Operand, Told, parse_shares, parse_spectr
 from app.core.config import Settings
 from app.geometry.overlap import measured_fold
 from app.geometry.plausibility import size_warnings
-from app.inference.correspondence import TELL_MEASURED_OVERLAP, InvalidRegion, PlacedPart, region_from_token
+from app.inference.correspondence import InvalidRegion, PlacedPart, region_from_token
 from app.inference.models import (
     InvalidOverlap,
     SpectralModels,
@@ -44,7 +44,7 @@ class UnionOutcome:
     overlaps: list[float]  # each union step's overlap as told or measured; empty when neither
     boundaries: list[float]  # each step's boundary share as told or measured; empty when neither
     overlaps_from: OverlapSource | None  # where they came from
-    overlaps_told: bool  # whether the union operator was told them
+    overlaps_told: list[bool]  # per step, whether the union operator was told it
     placed: list[PlacedPart]  # each uploaded operand placed on the template, when the correspondence model was run
     regions: list[np.ndarray] | None  # each operand's template region (placed or carried), when every one has one
 
@@ -117,14 +117,16 @@ async def union_of_operands(
     regions = [part.region for part in placed] + (carried or [])
     if len(regions) != len(operands):
         regions = None  # some operand's place is unknown: the spectral localizer and no measured overlap
-    tell = source is not None
+    told_overlaps, told_boundaries = overlaps, boundaries
     if regions is not None and source is None and len(regions) > 1:
         overlaps, boundaries = models.template_regions.fold(regions)
-        source, tell = "correspondence", TELL_MEASURED_OVERLAP and models.reads_overlap
         boundaries = boundaries if models.reads_boundary else None
+        source = "correspondence"
+        told_overlaps, told_boundaries = _worth_telling(models, overlaps, boundaries)
+    reported = overlaps or []
+    tell = [share is not None for share in told_overlaps] if told_overlaps is not None else [False] * len(reported)
     started = time.perf_counter()
     values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
-    told_overlaps, told_boundaries = (overlaps, boundaries) if tell else (None, None)
     result = await anyio.to_thread.run_sync(models.union, values, told_overlaps, told_boundaries)
     seconds = time.perf_counter() - started
     INFERENCE.labels("union").observe(seconds)
@@ -143,6 +145,24 @@ async def union_of_operands(
         placed,
         regions,
     )
+
+
+def _worth_telling(
+    models: SpectralModels, overlaps: list[float], boundaries: list[float] | None
+) -> tuple[list[float | None] | None, list[float | None] | None]:
+    """The measured shares the union is told: each step's where its measured overlap is below the
+    graph's threshold (None, untold, elsewhere); nothing for models that read no overlap, or when
+    no step qualifies."""
+    below = models.correspondence.tell_below if models.correspondence is not None else 0.0
+    if not models.reads_overlap or not any(share < below for share in overlaps):
+        return None, None
+    told = [share if share < below else None for share in overlaps]
+    edges = (
+        None
+        if boundaries is None
+        else [e if share < below else None for share, e in zip(overlaps, boundaries, strict=True)]
+    )
+    return told, edges
 
 
 def _placed(models: SpectralModels, operands: list[Operand]) -> list[PlacedPart]:

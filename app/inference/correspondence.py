@@ -63,10 +63,10 @@ def region_from_token(token: object, vertices: int, name: str) -> np.ndarray:
     return region
 
 
-# Whether a union of uploaded parts is told the overlap and boundary share its parts' regions
-# measure (where the client told none): decided by the measured union error, told against untold,
-# on held-out pairs (models/MODEL_CARD.md, "Correspondence").
-TELL_MEASURED_OVERLAP = True
+# The graph's metadata key: a union step is told the overlap and boundary share its operands'
+# regions measure (where the client told none) when the measured overlap is below this value,
+# chosen at export as the one whose unions erred least on validation pairs (0: never told).
+TELL_BELOW_KEY = "tell_overlap_below"
 
 
 @dataclass(frozen=True)
@@ -146,6 +146,8 @@ class CorrespondenceModel:
         if names != CORRESPONDENCE_INPUTS:
             raise ValueError(f"the correspondence graph reads {names}, not {CORRESPONDENCE_INPUTS}")
         self.regions = regions
+        metadata = self.session.get_modelmeta().custom_metadata_map
+        self.tell_below = float(metadata.get(TELL_BELOW_KEY, 0.0))
 
     def place(self, inputs: PartInputs) -> Placement:
         """Each vertex of a part (its inputs from app.geometry.descriptors) on the template."""

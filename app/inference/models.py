@@ -107,14 +107,16 @@ def checked_boundaries(
     return _one_share_per_step(boundaries, operands, "boundary shares", "boundary", meaning)
 
 
-def _one_share_per_step(values: list[float], operands: int, plural: str, name: str, meaning: str) -> list[float]:
+def _one_share_per_step(
+    values: list[float | None], operands: int, plural: str, name: str, meaning: str
+) -> list[float | None]:
     """``values`` when they are one per union step (``operands`` − 1) and each in 0 … 1 (NaN is
     not); else InvalidOverlap naming the count or the value, as ``name[i]``."""
     if len(values) != operands - 1:
         steps = operands - 1
         raise InvalidOverlap(f"{len(values)} {plural} for {operands} operands: give one per union step ({steps})")
     for i, value in enumerate(values):
-        if not 0.0 <= value <= 1.0:  # NaN fails too
+        if value is not None and not 0.0 <= value <= 1.0:  # NaN fails too; None: this step not told
             raise InvalidOverlap(f"{name}[{i}] is {value}: {meaning}, from 0 to 1")
     return list(values)
 
@@ -202,8 +204,8 @@ class SpectralModels:
         edges = checked_boundaries(boundaries, overlaps, len(spectra), self.reads_boundary)
         current, sigma = spectra[0].astype(np.float64), np.zeros(self.k)
         for other, overlap, edge in zip(spectra[1:], steps, edges, strict=True):
-            told = np.array([overlap]) if self.reads_overlap else None
-            boundary = np.array([edge]) if self.reads_boundary else None
+            told = np.array([UNKNOWN_OVERLAP if overlap is None else overlap]) if self.reads_overlap else None
+            boundary = np.array([UNKNOWN_BOUNDARY if edge is None else edge]) if self.reads_boundary else None
             feeds = union_feeds(self.union_inputs, current[None], other[None], told, boundary)
             union, step_sigma = self.union_session.run(None, feeds)
             sigma = chained_sigma(current, sigma, union[0].astype(np.float64), step_sigma[0].astype(np.float64))

@@ -107,8 +107,9 @@ def test_union_of_uploads_measures_its_overlap_and_a_told_one_wins(client, sampl
     measured = client.post("/v1/union", files=files).json()
     assert measured["overlaps_from"] == "correspondence"
     assert len(measured["overlaps"]) == 1 and 0.0 <= measured["overlaps"][0] <= 1.0
+    assert len(measured["overlaps_told"]) == 1
     told = client.post("/v1/union", files=files, params={"overlap": "0.25"}).json()
-    assert told["overlaps_from"] == "told" and told["overlaps"] == [0.25] and told["overlaps_told"]
+    assert told["overlaps_from"] == "told" and told["overlaps"] == [0.25] and told["overlaps_told"] == [True]
     spectra = json.dumps([operand["eigenvalues"] for operand in measured["operands"]])
     untold = client.post("/v1/union", data={"spectra": spectra}).json()
     assert untold["overlaps_from"] is None and untold["overlaps"] == []
@@ -178,3 +179,24 @@ def test_bad_regions_get_a_problem_naming_them(client, regions, detail):
     answer = client.post("/v1/localize", data=form)
     assert answer.status_code == 422
     assert answer.json()["type"] == "/problems/invalid-region" and detail in answer.json()["detail"]
+
+
+@pytest.mark.parametrize("tell_below", [0.0, 1.01])
+def test_a_measured_overlap_is_told_only_below_the_graphs_threshold(client, samples, tell_below):
+    """Below the threshold the union is the one told the measured shares; at or above it, the
+    untold one (the shares still returned)."""
+    correspondence = client.app.state.resources.require_models().correspondence
+    kept, correspondence.tell_below = correspondence.tell_below, tell_below
+    try:
+        files = [("files", (name, data)) for name, data in samples.items()]
+        measured = client.post("/v1/union", files=files).json()
+    finally:
+        correspondence.tell_below = kept
+    spectra = json.dumps([operand["eigenvalues"] for operand in measured["operands"]])
+    told = tell_below > measured["overlaps"][0]
+    assert measured["overlaps_told"] == [told]
+    params = {"overlap": str(measured["overlaps"][0])} if told else {}
+    if told and measured["boundaries"]:
+        params["boundary"] = str(measured["boundaries"][0])
+    by_spectra = client.post("/v1/union", params=params, data={"spectra": spectra}).json()
+    np.testing.assert_allclose(measured["eigenvalues"], by_spectra["eigenvalues"], rtol=1e-6)

@@ -10,9 +10,10 @@ regions; C: unseen identities, camera views) and per variant (mesh, re-meshed, p
 - left/right flips: parts whose places lie nearer the mirror image of the truth than the truth;
 - region IoU (area-weighted, plain and mirror-allowed) of the reached region against the true
   one, beside the whole body (IoU = the true area share) and the spectral localizer;
-- part-coverage error: mean absolute difference (points) of the 16 body parts' covered shares;
-- overlap share of pairs of parts cut from the same body: mean absolute error against the
-  true share, read from the two reached regions.
+- part-coverage error: mean absolute difference (points) of the 16 body parts' covered shares.
+
+Pairs of parts of one person (:mod:`training.correspondence.pairs`): the overlap measured from
+the two reached regions against the true one, and the union told it or not.
 """
 
 from dataclasses import dataclass
@@ -23,10 +24,10 @@ import numpy as np
 from app.contract import CORRESPONDENCE_INPUTS
 from app.geometry.descriptors import PartInputs
 from app.geometry.tangent import GradientStencil
-from app.inference.correspondence import CorrespondenceModel, Placement, TemplateRegions
+from app.inference.correspondence import CorrespondenceModel, Placement
 from app.inference.models import SpectralModels
 from app.inference.template import Template, part_coverage
-from training.correspondence.pairs import PAIR_SETS, load_pairs
+from training.correspondence.pairs import PAIR_SETS, VALIDATION_SETS, load_pairs
 from training.correspondence.parts import VARIANTS
 from training.correspondence.train import load_parts
 from training.data.spectra import task_spectrum
@@ -92,18 +93,16 @@ def score_part(
 
 
 def evaluate_correspondence(parts_dir: Path, graph: Path, models: Path) -> dict:
-    """Every test set × variant's mean figures, and the overlap error of same-body pairs."""
+    """Every test set × variant's mean figures."""
     served = SpectralModels(models)
     template = served.template
-    regions = TemplateRegions(template, served.vertex_area)
-    model = CorrespondenceModel(graph, regions)
+    model = CorrespondenceModel(graph, served.template_regions)
     shapes = np.load(parts_dir / "shapes.npy", mmap_mode="r")
     n = len(template.vertices)
     table: dict[str, dict] = {}
     for name in TEST_SETS:
         parts = load_parts(parts_dir, name)
         rows: dict[str, list[PartScore]] = {variant: [] for variant in VARIANTS}
-        reached, truths, bodies = [], [], []
         for part in parts:
             truth = np.unpackbits(part["mask"], count=n).astype(bool)
             placement = model.place(_inputs(part))
@@ -116,61 +115,93 @@ def evaluate_correspondence(parts_dir: Path, graph: Path, models: Path) -> dict:
             rows[str(part["variant"])].append(
                 score_part(part, placement, region, truth, localized_mask, template, served.vertex_area)
             )
-            reached.append(region)
-            truths.append(truth)
-            bodies.append(int(part["shape"]))
         table[name] = {variant: _mean(scores) for variant, scores in rows.items() if scores}
-        table[name]["overlap"] = _overlap_errors(regions, reached, truths, bodies)
     return table
+
+
+# The thresholds tried for telling the union the measured overlap: told where the measured share
+# is below it (0: never told; above 1: always).
+TELL_THRESHOLDS = (0.0, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 1.01)
 
 
 def evaluate_pairs(parts_dir: Path, graph: Path, models: Path) -> dict:
-    """Per pair set and kind: the overlap and boundary share measured from the parts' regions
-    against the truth, the union's error untold / told the measured shares / told the true ones
-    beside the elementwise minimum, and the union's region IoU beside the whole body and the
-    spectral localizer (the union of the localized parts, as /v1/localize answers spectra)."""
+    """The pairs' figures: the tell threshold chosen on the validation pairs (training people),
+    then every test pair set's summary with it (see :func:`pair_rows`, :func:`summary`)."""
     served = SpectralModels(models)
-    regions = TemplateRegions(served.template, served.vertex_area)
-    model = CorrespondenceModel(graph, regions)
-    n = len(served.template.vertices)
-    area = served.vertex_area
-    table: dict[str, dict] = {}
-    for name in PAIR_SETS:
-        rows: dict[str, list[dict]] = {}
-        for pair in load_pairs(parts_dir, name):
-            a, b, union = (np.unpackbits(pair[f"mask_{s}"], count=n).astype(bool) for s in ("a", "b", "union"))
-            placed = [model.placed(_inputs(pair, side)) for side in ("a_", "b_")]
-            measured, measured_edge = regions.fold([p.region for p in placed])
-            true, true_edge = regions.fold([a, b])
-            spectra = [pair["spectrum_a"], pair["spectrum_b"]]
-            truth = pair["union"][None]
-            untold = served.union(spectra).eigenvalues
-            told = served.union(spectra, measured, measured_edge if served.reads_boundary else None).eigenvalues
-            oracle = served.union(spectra, true, true_edge if served.reads_boundary else None).eigenvalues
-            localized = np.zeros(n, bool)
-            localized[served.localize(untold, spectra).vertices] = True
-            reached = placed[0].region | placed[1].region
-            rows.setdefault(str(pair["kind"]), []).append(
-                {
-                    "overlap_error": abs(measured[0] - true[0]),
-                    "boundary_error": abs(measured_edge[0] - true_edge[0]),
-                    "true_overlap": true[0],
-                    "untold": spectral_errors(untold[None], truth)["mre"],
-                    "told_measured": spectral_errors(told[None], truth)["mre"],
-                    "told_truth": spectral_errors(oracle[None], truth)["mre"],
-                    "elementwise_min": spectral_errors(elementwise_min(*(s[None] for s in spectra)), truth)["mre"],
-                    "iou": iou(reached, union, area),
-                    "iou_mirror": max(iou(reached, union, area), iou(reached[served.template.mirror], union, area)),
-                    "whole_body_iou": float(area[union].sum() / area.sum()),
-                    "localizer_iou_mirror": max(
-                        iou(localized, union, area), iou(localized[served.template.mirror], union, area)
-                    ),
-                }
-            )
-        table[name] = {kind: {"pairs": len(r)} | _means(r) for kind, r in sorted(rows.items())}
-        every = [row for r in rows.values() for row in r]
-        table[name]["all"] = {"pairs": len(every)} | _means(every)
-    return table
+    model = CorrespondenceModel(graph, served.template_regions)
+    validation = [row for name in VALIDATION_SETS for row in pair_rows(parts_dir, name, model, served)]
+    threshold = choose_threshold(validation)
+    tests = {name: summary(pair_rows(parts_dir, name, model, served), threshold) for name in PAIR_SETS}
+    return {"tell_below": threshold, "validation": summary(validation, threshold)["all"], "sets": tests}
+
+
+def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: SpectralModels) -> list[dict]:
+    """Per pair of set ``name``: its kind, the overlap and boundary share measured from the
+    parts' regions and their errors, the union's error untold / told the measured shares / told
+    the true ones beside the elementwise minimum, and the union's region IoU beside the whole body
+    and the spectral localizer (the union of the localized parts, as /v1/localize answers spectra)."""
+    regions, n, area = served.template_regions, len(served.template.vertices), served.vertex_area
+    mirror = served.template.mirror
+    rows = []
+    for pair in load_pairs(parts_dir, name):
+        a, b, union = (np.unpackbits(pair[f"mask_{s}"], count=n).astype(bool) for s in ("a", "b", "union"))
+        placed = [model.placed(_inputs(pair, side)) for side in ("a_", "b_")]
+        measured, measured_edge = regions.fold([p.region for p in placed])
+        true, true_edge = regions.fold([a, b])
+        spectra = [pair["spectrum_a"], pair["spectrum_b"]]
+        truth = pair["union"][None]
+        untold = served.union(spectra).eigenvalues
+        told = served.union(spectra, measured, measured_edge if served.reads_boundary else None).eigenvalues
+        oracle = served.union(spectra, true, true_edge if served.reads_boundary else None).eigenvalues
+        localized = np.zeros(n, bool)
+        localized[served.localize(untold, spectra).vertices] = True
+        reached = placed[0].region | placed[1].region
+        rows.append(
+            {
+                "kind": str(pair["kind"]),
+                "measured_overlap": measured[0],
+                "overlap_error": abs(measured[0] - true[0]),
+                "boundary_error": abs(measured_edge[0] - true_edge[0]),
+                "true_overlap": true[0],
+                "untold": spectral_errors(untold[None], truth)["mre"],
+                "told_measured": spectral_errors(told[None], truth)["mre"],
+                "told_truth": spectral_errors(oracle[None], truth)["mre"],
+                "elementwise_min": spectral_errors(elementwise_min(*(s[None] for s in spectra)), truth)["mre"],
+                "iou": iou(reached, union, area),
+                "iou_mirror": max(iou(reached, union, area), iou(reached[mirror], union, area)),
+                "whole_body_iou": float(area[union].sum() / area.sum()),
+                "localizer_iou_mirror": max(iou(localized, union, area), iou(localized[mirror], union, area)),
+            }
+        )
+    return rows
+
+
+def served_error(row: dict, threshold: float) -> float:
+    """The union's error as served: told the measured shares where the measured overlap is below
+    ``threshold``, untold elsewhere."""
+    return row["told_measured"] if row["measured_overlap"] < threshold else row["untold"]
+
+
+def choose_threshold(rows: list[dict]) -> float:
+    """The tell threshold of :data:`TELL_THRESHOLDS` with the lowest mean served error over
+    ``rows`` (validation pairs); the lower threshold where two tie."""
+    errors = [np.mean([served_error(row, t) for row in rows]) for t in TELL_THRESHOLDS]
+    return float(TELL_THRESHOLDS[int(np.argmin(errors))])
+
+
+def summary(rows: list[dict], threshold: float) -> dict[str, dict]:
+    """Mean figures per kind and over all rows, with the served error at ``threshold``."""
+    kinds: dict[str, list[dict]] = {}
+    for row in rows:
+        kinds.setdefault(row["kind"], []).append(row)
+    kinds["all"] = rows
+    out = {}
+    for kind, members in sorted(kinds.items()):
+        numbers = [
+            {k: v for k, v in row.items() if k != "kind"} | {"served": served_error(row, threshold)} for row in members
+        ]
+        out[kind] = {"pairs": len(members)} | _means(numbers)
+    return out
 
 
 def _means(rows: list[dict]) -> dict[str, float]:
@@ -186,15 +217,3 @@ def _inputs(part: dict[str, np.ndarray], prefix: str = "") -> PartInputs:
 def _mean(scores: list[PartScore]) -> dict[str, float]:
     fields = PartScore.__dataclass_fields__
     return {"parts": len(scores)} | {key: float(np.mean([getattr(s, key) for s in scores])) for key in fields}
-
-
-def _overlap_errors(regions: TemplateRegions, reached: list, truths: list, bodies: list) -> dict[str, float]:
-    """Mean absolute error of the overlap share measured from reached regions, over every pair
-    of parts of one body (any variants): the pairs a session would unite."""
-    errors = []
-    for i in range(len(reached)):
-        for j in range(i + 1, len(reached)):
-            if bodies[i] == bodies[j]:
-                measured = regions.overlap_share(reached[i], reached[j])
-                errors.append(abs(measured - regions.overlap_share(truths[i], truths[j])))
-    return {"pairs": len(errors), "mean_absolute_error": float(np.mean(errors)) if errors else float("nan")}

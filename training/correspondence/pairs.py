@@ -32,6 +32,9 @@ from training.data.spectra import MESH, region_mesh, task_spectrum
 from training.data.workers import mapped, run_tasks, sampler_of
 
 PAIR_SETS = ("pairs_b", "pairs_c")
+# The same draws on the training people in their training poses: what a choice made from pairs
+# (whether the union is told the measured overlap) is made on, so the test pairs stay unseen.
+VALIDATION_SETS = ("validation_b", "validation_c")
 K = 20  # the served union operator's spectra
 # A session's pairs: (kind, view of A, view of B, B in another pose); views 0…4 orbit, 5 re-scan, 6 close-up.
 SESSION_PAIRS = (
@@ -48,13 +51,25 @@ def build_pairs(preset: PartsPreset, out: Path, seed: int = 0, workers: int | No
     (out / "pairs").mkdir(exist_ok=True)
     poses = preset.poses
     unknown = range(preset.train_identities, preset.train_identities + preset.test_identities)
+    people = {name: (unknown, poses) for name in PAIR_SETS}
+    people |= {name: (range(preset.train_identities), poses - 1) for name in VALIDATION_SETS}
     arguments = []
-    for name in PAIR_SETS:
+    for name, (identities, usable) in people.items():
         for index in range(preset.test_pairs):
-            identity = unknown[index % len(unknown)]
+            identity = identities[index % len(identities)]
             if not pair_path(out, name, index).exists():
                 arguments.append(
-                    (str(out / "template"), str(out / "shapes.npy"), str(out), seed, name, index, identity, poses)
+                    (
+                        str(out / "template"),
+                        str(out / "shapes.npy"),
+                        str(out),
+                        seed,
+                        name,
+                        index,
+                        identity,
+                        poses,
+                        usable,
+                    )
                 )
     run_tasks(draw_pairs, arguments, lambda index, result: None, None, workers, "pairs")
 
@@ -65,16 +80,25 @@ def pair_path(out: Path, name: str, index: int) -> Path:
 
 @threadpool_limits.wrap(limits=1)
 def draw_pairs(
-    template_dir: str, shapes_path: str, out: str, seed: int, name: str, index: int, identity: int, poses: int
+    template_dir: str,
+    shapes_path: str,
+    out: str,
+    seed: int,
+    name: str,
+    index: int,
+    identity: int,
+    poses: int,
+    usable: int,
 ) -> None:
-    """One draw of ``name``: a region pair, or a session's pairs; saved as one file of rows."""
+    """One draw of ``name``: a region pair, or a session's pairs, on ``identity`` in two of its
+    first ``usable`` poses; saved as one file of rows."""
     sampler = sampler_of(template_dir)
     shapes = mapped(shapes_path)
-    rng = np.random.default_rng([seed, 0xC0 + 2, PAIR_SETS.index(name), index])
-    pose, other = (int(p) for p in rng.choice(poses, size=2, replace=False))
+    rng = np.random.default_rng([seed, 0xC0 + 2, (*PAIR_SETS, *VALIDATION_SETS).index(name), index])
+    pose, other = (int(p) for p in rng.choice(usable, size=2, replace=False))
     shape_a, shape_b = identity * poses + pose, identity * poses + other
     body = np.asarray(shapes[shape_a], dtype=np.float64)
-    if name == "pairs_b":
+    if name.endswith("_b"):
         while True:
             pair = sample_pair(sampler, rng, str(rng.choice([PARTIAL_UNION, OVERLAP])))
             rows = [_row(sampler, shapes, "region", pair.a, pair.b, shape_a, shape_b)]

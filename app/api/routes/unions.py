@@ -53,8 +53,11 @@ class UnionResponse(BaseModel):
         "correspondence model, whenever every operand is an uploaded file and the client told nothing); null "
         "when none.",
     )
-    overlaps_told: bool = Field(
-        False, description="Whether the union operator was told these overlaps (a client's own always are)."
+    overlaps_told: list[bool] = Field(
+        default_factory=list,
+        description="Per union step, whether the union operator was told its overlap (a client's own always is; "
+        "one measured from the parts' places where the model card's validation pairs show it helps: below the "
+        "graph's threshold).",
     )
     warnings: list[str] = Field(
         default_factory=list,
