@@ -1,0 +1,68 @@
+"""The correspondence network: its two stencil paths agree, it learns, and its ONNX graph matches
+PyTorch on parts of other sizes than the one it was traced on (no anny: an irregular curved
+patch, with no symmetry to hide a place, is the template)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("onnxscript")
+
+from app.geometry.descriptors import mesh_inputs  # noqa: E402
+from app.geometry.topology import drop_unreferenced, referenced  # noqa: E402
+from app.inference.template import Template, faces_inside  # noqa: E402
+from tests.conftest import bumpy_patch  # noqa: E402
+from training.correspondence.export import correspondence_parity, export_correspondence  # noqa: E402
+from training.correspondence.net import CorrespondenceConfig, stencil_matrices  # noqa: E402
+from training.correspondence.train import TrainingPreset, restored, torch_inputs, train  # noqa: E402
+
+CONFIG = CorrespondenceConfig(width=16, blocks=2, patches=24, neighbourhood_m=0.2, offset_m=0.05)
+
+
+def _parts_dir(root: Path) -> Path:
+    """A bumpy patch 0.6 m across as the template, and pieces of it (cut by lines at several
+    angles) as parts whose every vertex's target is its own template vertex."""
+    mesh = bumpy_patch(5, n=500)
+    vertices = 0.3 * mesh.vertices
+    template = Template(vertices, mesh.faces, np.zeros(len(vertices), int), np.arange(len(vertices)))
+    template.save(root / "template", "a bumpy patch")
+    (root / "parts").mkdir()
+    for index, angle in enumerate((0.0, 1.5, 3.0, 4.5)):
+        mask = vertices[:, :2] @ [np.cos(angle), np.sin(angle)] > -0.1
+        inside = mesh.faces[faces_inside(mask, mesh.faces)]
+        target = np.flatnonzero(referenced(inside, len(vertices)))
+        part = mesh_inputs(*drop_unreferenced(vertices, inside), k=32)
+        np.savez(root / "parts" / f"train-{index:05d}.npz", target=target, **part.feeds())
+    return root
+
+
+def test_the_sparse_and_gathered_stencils_give_one_network(tmp_path):
+    part = dict(np.load(next((_parts_dir(tmp_path) / "parts").glob("*.npz"))))
+    from training.correspondence.net import CorrespondenceNet
+
+    model = CorrespondenceNet(CONFIG, np.random.default_rng(0).normal(size=(CONFIG.patches, 3))).eval()
+    inputs = torch_inputs(part)
+    with torch.no_grad():
+        gathered = model.heads(*inputs)
+        sparse = model.heads(*inputs, stencil_matrices(inputs[4], inputs[5]))
+    torch.testing.assert_close(sparse.logits, gathered.logits, rtol=1e-4, atol=1e-5)
+    torch.testing.assert_close(sparse.offset, gathered.offset, rtol=1e-4, atol=1e-6)
+
+
+def test_it_learns_and_its_graph_matches_pytorch_on_other_parts(tmp_path):
+    parts_dir = _parts_dir(tmp_path)
+    checkpoint = train(
+        parts_dir,
+        tmp_path / "run.pt",
+        TrainingPreset(name="test", steps=400, learning_rate=5e-3, config=CONFIG),
+        log=lambda _: None,
+    )
+    losses = checkpoint["losses"]
+    first, last = losses[:20].mean(axis=0), losses[-20:].mean(axis=0)
+    assert last[0] < 0.6 * first[0] and last[1] < 0.8 * first[1]  # cross entropy and place error fall
+    model = restored(checkpoint)
+    parts = [dict(np.load(path)) for path in sorted((parts_dir / "parts").glob("*.npz"))]
+    export_correspondence(model, parts[0], tmp_path / "correspondence.onnx")
+    assert correspondence_parity(model, tmp_path / "correspondence.onnx", parts[1:]) < 1e-4
