@@ -1,6 +1,6 @@
 """What placing one uploaded part on the template costs, stage by stage, beside LaPy's eigenbasis.
 
-Run: ``python benchmarks/bench_correspondence.py`` (needs ``pip install -e '.[train,dev]'`` for
+Run: ``python -m benchmarks.bench_correspondence`` (needs ``pip install -e '.[train,dev]'`` for
 LaPy and cholespy, and ``models/correspondence.onnx``). Prints, as a Markdown table, the median
 milliseconds (stages taking turns within every repeat) on the README's two sample parts (~9 k
 and ~11 k vertices) and a ~10 k-point cloud of the second: the Laplacian, the part's spectrum

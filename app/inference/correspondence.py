@@ -24,9 +24,13 @@ from app.core.errors import InputError
 from app.geometry.descriptors import PartInputs
 from app.inference.template import RegionBoundaries, Template
 
-# A part's vertices land on template vertices ~1–2 cm apart with gaps where the part is coarser
-# or its places bunch; closing the reached vertices by this edge-path radius (dilate, then erode)
-# fills such gaps without growing the region's outline.
+# A template vertex is reached when a placed vertex lies within REACH_M of it, and the reached
+# vertices are closed by CLOSING_M along the template's edges (dilate, then erode), filling the
+# gaps a coarse part leaves without growing the outline. Places bunch and sit a little inside
+# the surface (a weighted centre of patch centres lies on their chords): a template vertex's own
+# nearest place misses ~30 % of a region. Chosen on 60 training parts (region IoU 0.58 by nearest
+# vertex; reach 1.5 / 2 / 3 / 4 cm, closed: 0.66 / 0.75 / 0.79 / 0.77), not on test parts.
+REACH_M = 0.03
 CLOSING_M = 0.03
 
 
@@ -103,10 +107,11 @@ class TemplateRegions:
         """(n,) the template vertex nearest to each rest-pose position."""
         return self.tree.query(positions)[1]
 
-    def reached(self, vertices: np.ndarray) -> np.ndarray:
-        """(V,) bool: the template region a part's placed ``vertices`` reach, closed by
-        :data:`CLOSING_M` (dilation then erosion along the template's edges)."""
-        grown = self._within(np.unique(vertices))
+    def reached(self, positions: np.ndarray) -> np.ndarray:
+        """(V,) bool: the template region a part's places (n, 3) reach: the template vertices
+        within :data:`REACH_M` of a place, closed by :data:`CLOSING_M` along the edges."""
+        distance, _ = cKDTree(positions).query(self.tree.data, distance_upper_bound=REACH_M)
+        grown = self._within(np.flatnonzero(np.isfinite(distance)))
         outside = np.flatnonzero(~grown)
         return grown & ~self._within(outside) if len(outside) else grown
 
@@ -128,8 +133,8 @@ class TemplateRegions:
         overlaps, boundaries = [], []
         so_far = regions[0]
         for region in regions[1:]:
-            overlaps.append(self.overlap_share(so_far, region))
-            boundaries.append(float(self.boundaries.shares(so_far[None], region[None])[0]))
+            overlaps.append(min(self.overlap_share(so_far, region), 1.0))  # shares of sums: rounding past 1
+            boundaries.append(min(float(self.boundaries.shares(so_far[None], region[None])[0]), 1.0))
             so_far = so_far | region
         return overlaps, boundaries
 
@@ -159,7 +164,7 @@ class CorrespondenceModel:
 
     def region(self, placement: Placement) -> np.ndarray:
         """(V,) bool: the template region the placed part covers."""
-        return self.regions.reached(placement.vertex)
+        return self.regions.reached(placement.position)
 
     def placed(self, inputs: PartInputs) -> PlacedPart:
         placement = self.place(inputs)

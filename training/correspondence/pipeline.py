@@ -145,9 +145,9 @@ def goals(metrics: dict) -> list[str]:
             pairs["pairs_c"]["all"]["overlap_error"] <= 0.08,
         ),
         (
-            "union told measured within 1 point of told truth (every kind)",
-            f"{100 * max(r['told_measured'] - r['told_truth'] for r in union_rows):.1f} points at worst",
-            all(r["told_measured"] - r["told_truth"] <= 0.01 for r in union_rows),
+            "union as served within 1 point of told truth (every kind)",
+            f"{100 * max(r['served'] - r['told_truth'] for r in union_rows):.1f} points at worst",
+            all(r["served"] - r["told_truth"] <= 0.01 for r in union_rows),
         ),
     ]
     if nested is not None:
