@@ -72,7 +72,8 @@ class Resources:
             models = f"models unavailable ({self.models_problem})"
         else:
             template = len(self.models.template.vertices)
-            models = f"models {self.models.version} (k = {self.models.k}, template of {template} vertices)"
+            placed = "uploads placed on it" if self.models.correspondence else "no correspondence model"
+            models = f"models {self.models.version} (k = {self.models.k}, template of {template} vertices, {placed})"
         backend = "postgresql" if self.settings.database_url else f"sqlite {self.settings.database_path}"
         problem = self.store_problem
         try:
