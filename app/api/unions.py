@@ -77,11 +77,15 @@ async def union_of_operands(
     scale: float | None,
     told: Told = NOT_TOLD,
     cap_holes: bool = False,
+    locate: bool = False,
 ) -> UnionOutcome:
     """Resolve the operands (solving uploaded files) and fold them through the union operator,
     told the overlap (and boundary share) of each step where the client knows it, or measured
-    from the uploads (``told.measure``: views in one frame and pose); ``cap_holes``: one uploaded
-    whole-body scan, its holes capped (:func:`app.api.operands.resolve_operands`)."""
+    from the uploads (``told.measure``: views in one frame and pose), or from where the
+    correspondence model places them (every operand an upload or a spectrum with its region);
+    ``cap_holes``: one uploaded whole-body scan, its holes capped
+    (:func:`app.api.operands.resolve_operands`); ``locate``: the route answers the operands'
+    region, so even one upload is placed (others place uploads only to measure a step)."""
     overlaps, boundaries = parse_shares(told.overlap), parse_shares(told.boundary, "boundary")
     if told.measure:
         _check_measurable(overlaps, boundaries, spectra, models)
@@ -93,7 +97,9 @@ async def union_of_operands(
     carried = _carried_regions(told.regions, spectra, models)
     if carried is not None and files and models.correspondence is None:
         raise InvalidRegion("these models cannot place uploaded files: send regions with spectra operands only")
-    places = models.correspondence is not None and bool(files) and (not (spectra and spectra.strip()) or carried)
+    steps = bool(files) and len(files) + (len(carried) if carried else 0) > 1
+    only_placeable = not (spectra and spectra.strip()) or carried is not None
+    places = models.correspondence is not None and bool(files) and only_placeable and (locate or steps)
     operands, solve_ms = await resolve_operands(
         request,
         settings,

@@ -200,3 +200,13 @@ def test_a_measured_overlap_is_told_only_below_the_graphs_threshold(client, samp
         params["boundary"] = str(measured["boundaries"][0])
     by_spectra = client.post("/v1/union", params=params, data={"spectra": spectra}).json()
     np.testing.assert_allclose(measured["eigenvalues"], by_spectra["eigenvalues"], rtol=1e-6)
+
+
+def test_one_upload_is_placed_only_where_its_region_is_answered(client, samples):
+    """Placing costs a second eigen-solve: a union route with one upload has no step to measure
+    and does not place it; /v1/localize, which answers its region, does."""
+    name = "no_head_neck.ply"
+    one = [("files", (name, samples[name]))]
+    union = client.post("/v1/union", files=one).json()
+    assert union["overlaps_from"] is None and union["overlaps"] == []
+    assert client.post("/v1/localize", files=one).json()["located_by"] == "correspondence"

@@ -68,7 +68,7 @@ async def localize(
     covers: for uploaded parts, the union of the regions their vertices are placed on (the
     correspondence model); for spectra, the localizer's region of the union, as large as its
     probabilities expect, grown to hold each operand's own region."""
-    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told)
+    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told, locate=True)
     confidence = None
     if outcome.regions is not None:
         region, confidence = await anyio.to_thread.run_sync(models.placed_region, outcome.regions, outcome.placed)
