@@ -25,6 +25,7 @@ from typing import Literal, Self
 import httpx
 
 from app.api.problems import PROBLEM_MEDIA_TYPE, Problem
+from app.api.routes.correspondence import CorrespondenceResponse
 from app.api.routes.localize import LocalizeResponse
 from app.api.routes.models import ModelsResponse
 from app.api.routes.overlap import OverlapResponse
@@ -109,6 +110,23 @@ class Client:
         body = self._post("/v1/spectrum", params, files=[("file", _part(scan))], data=data)
         return FootprintedReport(**body) if footprint else SpectrumReport(**body)
 
+    def correspondence(
+        self,
+        scan: Scan,
+        *,
+        units: Units = "m",
+        scale: float | None = None,
+        closed: bool = False,
+        boundary: Sequence[int] | None = None,
+    ) -> CorrespondenceResponse:
+        """Each vertex of one scan placed on the template's rest pose, with its confidence, and the
+        template region it covers (``region.token`` to send back in ``regions`` beside its spectrum)."""
+        params = _params(units=units, scale=scale, closed=closed)
+        data = {"boundary": json.dumps(list(boundary))} if boundary is not None else None
+        return CorrespondenceResponse(
+            **self._post("/v1/correspondence", params, files=[("file", _part(scan))], data=data)
+        )
+
     def overlap(self, footprints: Sequence[str]) -> OverlapResponse:
         """Each union step's overlap and boundary share of registered views, from their footprint
         tokens (the union so far's ``union_footprint`` may stand for all the earlier ones)."""
@@ -125,12 +143,14 @@ class Client:
         overlap: Sequence[float] | None = None,
         boundary: Sequence[float] | None = None,
         measure_overlap: bool = False,
+        regions: Sequence[str] | None = None,
     ) -> UnionResponse:
         """The union's spectrum and its 90 % interval; files first, then spectra, folded left to right;
         ``overlap`` (one share per union step) where known, with ``boundary`` (each step's boundary share)
-        where that is known too, or ``measure_overlap`` for registered uploads."""
+        where that is known too, or ``measure_overlap`` for registered uploads; ``regions``: each spectrum's
+        region token, where it lies on the template (uploads are placed by the service)."""
         params = _union_params(units, scale, overlap, boundary, measure_overlap)
-        return UnionResponse(**self._operands("/v1/union", files, spectra, params))
+        return UnionResponse(**self._operands("/v1/union", files, spectra, params, regions))
 
     def localize(
         self,
@@ -142,10 +162,11 @@ class Client:
         overlap: Sequence[float] | None = None,
         boundary: Sequence[float] | None = None,
         measure_overlap: bool = False,
+        regions: Sequence[str] | None = None,
     ) -> LocalizeResponse:
         """The union, its region on the template body and the covered share of each body part."""
         params = _union_params(units, scale, overlap, boundary, measure_overlap)
-        return LocalizeResponse(**self._operands("/v1/localize", files, spectra, params))
+        return LocalizeResponse(**self._operands("/v1/localize", files, spectra, params, regions))
 
     def reconstruct(
         self,
@@ -157,13 +178,14 @@ class Client:
         overlap: Sequence[float] | None = None,
         boundary: Sequence[float] | None = None,
         measure_overlap: bool = False,
+        regions: Sequence[str] | None = None,
         cap_holes: bool = False,
     ) -> ReconstructResponse:
         """The person's body rebuilt from the union's spectrum (rest pose, template topology), with
         its height, area and its own spectrum as the check; ``cap_holes``: one whole-body mesh,
         its holes capped first."""
         params = _union_params(units, scale, overlap, boundary, measure_overlap) | _params(cap_holes=cap_holes or None)
-        return ReconstructResponse(**self._operands("/v1/reconstruct", files, spectra, params))
+        return ReconstructResponse(**self._operands("/v1/reconstruct", files, spectra, params, regions))
 
     def retrieve(
         self,
@@ -178,6 +200,7 @@ class Client:
         overlap: Sequence[float] | None = None,
         boundary: Sequence[float] | None = None,
         measure_overlap: bool = False,
+        regions: Sequence[str] | None = None,
         cap_holes: bool = False,
     ) -> RetrieveResponse:
         """The stored complete shapes nearest to the union of the operands; an open surface (a scan with
@@ -187,7 +210,7 @@ class Client:
         params = {"top": top, "rebuild": rebuild, "profile": profile}
         params |= _union_params(units, scale, overlap, boundary, measure_overlap)
         params |= _params(cap_holes=cap_holes or None)
-        return RetrieveResponse(**self._operands("/v1/retrieve", files, spectra, params))
+        return RetrieveResponse(**self._operands("/v1/retrieve", files, spectra, params, regions))
 
     def models(self) -> ModelsResponse:
         """What the service has loaded: model version, k, template, database."""
@@ -210,9 +233,21 @@ class Client:
         """Remove a stored shape (needs the API key)."""
         self._answer(self._http.delete(f"/v1/shapes/{shape_id}", headers=self._key_header()))
 
-    def _operands(self, path: str, files: Sequence[Scan], spectra: Sequence[Sequence[float]], params: dict) -> dict:
-        data = {"spectra": json.dumps([[float(v) for v in s] for s in spectra])} if spectra else None
-        return self._post(path, params, files=[("files", _part(scan)) for scan in files] or None, data=data)
+    def _operands(
+        self,
+        path: str,
+        files: Sequence[Scan],
+        spectra: Sequence[Sequence[float]],
+        params: dict,
+        regions: Sequence[str] | None = None,
+    ) -> dict:
+        """Files and spectra as the union routes take them, and the spectra's region tokens
+        (``regions``, one per spectrum: where each lies on the template, as :meth:`correspondence`
+        or :meth:`localize` answered it)."""
+        data = {"spectra": json.dumps([[float(v) for v in s] for s in spectra])} if spectra else {}
+        if regions is not None:
+            data["regions"] = json.dumps(list(regions))
+        return self._post(path, params, files=[("files", _part(scan)) for scan in files] or None, data=data or None)
 
     def _post(self, path: str, params: dict, *, files: list | None, data: dict | None) -> dict:
         response = self._http.post(path, params=params, files=files, data=data, headers=self._key_header())

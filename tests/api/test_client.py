@@ -126,3 +126,18 @@ def test_a_ball_with_a_hole_is_stored_and_retrieved_once_its_hole_is_capped(serv
     assert found.ranked_by == "union" and found.matches[0].id == stored.id
     assert found.matches[0].distance == pytest.approx(0.0, abs=1e-6)
     service.delete_shape(stored.id)
+
+
+def test_scans_placed_once_are_united_as_spectra_with_their_regions(service, scans):
+    """The client's correspondence and regions: two scans placed one by one, then sent back as
+    spectra with their region tokens, are localized and united as the uploads are."""
+    placed = [service.correspondence(scan) for scan in scans]
+    assert all(part.vertices == len(part.position) for part in placed)
+    spectra, regions = [p.eigenvalues for p in placed], [p.region.token for p in placed]
+    by_files = service.localize(files=scans)
+    by_spectra = service.localize(spectra=spectra, regions=regions)
+    assert by_files.located_by == by_spectra.located_by == "correspondence"
+    assert by_spectra.vertices == by_files.vertices
+    np.testing.assert_allclose(
+        service.union(spectra=spectra, regions=regions).eigenvalues, by_files.eigenvalues, rtol=1e-6
+    )
