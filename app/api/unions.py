@@ -172,9 +172,10 @@ def _worth_telling(
 
 
 def _placed(models: SpectralModels, operands: list[Operand]) -> list[PlacedPart]:
-    """Every uploaded operand placed on the template by the correspondence model (timed)."""
+    """Every uploaded operand placed on the template by the correspondence model (timed); spectra
+    operands have nothing to place (their regions, if any, were carried)."""
     with INFERENCE.labels("correspondence").time():
-        return [models.correspondence.placed(operand.part) for operand in operands]
+        return [models.correspondence.placed(operand.part) for operand in operands if operand.part is not None]
 
 
 def _carried_regions(text: str | None, spectra: str | None, models: SpectralModels) -> list[np.ndarray] | None:

@@ -210,3 +210,17 @@ def test_one_upload_is_placed_only_where_its_region_is_answered(client, samples)
     union = client.post("/v1/union", files=one).json()
     assert union["overlaps_from"] is None and union["overlaps"] == []
     assert client.post("/v1/localize", files=one).json()["located_by"] == "correspondence"
+
+
+def test_an_upload_beside_a_spectrum_sent_with_its_region_is_placed_as_both_uploads(client, samples):
+    """A session's next scan uploaded beside the earlier one's spectrum and region token: the same
+    region and union as both uploaded together."""
+    (first, data_a), (second, data_b) = samples.items()
+    earlier = _correspond(client, second, data_b).json()
+    form = {"spectra": json.dumps([earlier["eigenvalues"]]), "regions": json.dumps([earlier["region"]["token"]])}
+    mixed = client.post("/v1/localize", files=[("files", (first, data_a))], data=form)
+    assert mixed.status_code == 200, mixed.text
+    both = client.post("/v1/localize", files=[("files", (name, data)) for name, data in samples.items()]).json()
+    assert mixed.json()["located_by"] == "correspondence" and mixed.json()["vertices"] == both["vertices"]
+    assert mixed.json()["overlaps"] == pytest.approx(both["overlaps"])
+    np.testing.assert_allclose(mixed.json()["eigenvalues"], both["eigenvalues"], rtol=1e-6)

@@ -26,9 +26,9 @@ class LocalizeResponse(UnionResponse):
     part_coverage: dict[str, float] = Field(description="Covered share of each body part's area.")
     template_vertices: int = Field(description="Vertices of the template body the indices refer to.")
     located_by: Literal["correspondence", "spectrum"] = Field(
-        description="correspondence: each uploaded part's vertices placed on the template (every operand an "
-        "uploaded file, and the correspondence model served), the region the union of the parts' regions, on "
-        "the side scanned; spectrum: the localizer's reading of the union's spectrum (up to left/right)."
+        description="correspondence: every operand placed on the template (an uploaded file by the correspondence "
+        "model, a spectrum by the region sent with it), the region the union of their regions, on the side "
+        "scanned; spectrum: the localizer's reading of the union's spectrum (up to left/right)."
     )
     vertex_confidence: list[float] | None = Field(
         None,

@@ -49,9 +49,9 @@ class UnionResponse(BaseModel):
     overlaps_from: Literal["told", "footprints", "correspondence"] | None = Field(
         None,
         description="Where overlaps and boundaries came from: told by the client (overlap, boundary), measured "
-        "from registered views (measure_overlap), or from the uploaded parts' places on the template (the "
-        "correspondence model, whenever every operand is an uploaded file and the client told nothing); null "
-        "when none.",
+        "from registered views (measure_overlap), or from the operands' places on the template (the "
+        "correspondence model's, whenever every operand is an uploaded file or a spectrum sent with its region, "
+        "and the client told nothing); null when none.",
     )
     overlaps_told: list[bool] = Field(
         default_factory=list,
