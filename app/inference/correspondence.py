@@ -15,14 +15,13 @@ from pathlib import Path
 
 import numpy as np
 import onnxruntime as ort
-import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from app.contract import CORRESPONDENCE_INPUTS
 from app.core.errors import InputError
 from app.geometry.descriptors import PartInputs
-from app.inference.template import RegionBoundaries, Template
+from app.inference.template import RegionBoundaries, Template, edge_graph
 
 # A template vertex is reached when a placed vertex lies within REACH_M of it, and the reached
 # vertices are closed by CLOSING_M along the template's edges (dilate, then erode), filling the
@@ -95,10 +94,7 @@ class TemplateRegions:
 
     def __init__(self, template: Template, vertex_area: np.ndarray) -> None:
         v, f = template.vertices, template.faces
-        edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-        length = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
-        graph = sp.csr_matrix((length, (edges[:, 0], edges[:, 1])), shape=(len(v),) * 2)
-        self.graph = graph.maximum(graph.T).tocsr()
+        self.graph = edge_graph(v, f)
         self.vertex_area = vertex_area
         self.tree = cKDTree(v)
         self.boundaries = RegionBoundaries(v, f)

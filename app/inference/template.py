@@ -57,6 +57,17 @@ class Template:
         )
 
 
+def edge_graph(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_matrix:
+    """(n, n) symmetric CSR of the mesh's edge lengths (sorted indices): what edge-path distances
+    on the template (regions, patches, closing) are measured along."""
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    lengths = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
+    graph = sp.coo_matrix((lengths, (edges[:, 0], edges[:, 1])), shape=(len(vertices),) * 2).tocsr()
+    graph = graph.maximum(graph.T).tocsr()
+    graph.sort_indices()
+    return graph
+
+
 def faces_inside(mask: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Faces whose three vertices are in ``mask`` (three ands: ~10x faster than ``all(axis=1)``)."""
     return mask[faces[:, 0]] & mask[faces[:, 1]] & mask[faces[:, 2]]

@@ -22,12 +22,12 @@ from dataclasses import asdict, dataclass
 from typing import NamedTuple
 
 import numpy as np
-import scipy.sparse as sp
 import torch
 from scipy.sparse.csgraph import dijkstra
 from torch import nn
 
 from app.geometry.descriptors import FEATURES
+from app.inference.template import edge_graph
 
 
 @dataclass(frozen=True)
@@ -150,10 +150,8 @@ def template_patches(vertices: np.ndarray, faces: np.ndarray, count: int) -> tup
     for _ in range(count - 1):
         chosen.append(int(np.argmax(distance)))
         distance = np.minimum(distance, np.linalg.norm(vertices - vertices[chosen[-1]], axis=1))
-    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
-    graph = sp.csr_matrix((length, (edges[:, 0], edges[:, 1])), shape=(len(vertices),) * 2)
-    _, _, sources = dijkstra(graph.maximum(graph.T), indices=chosen, min_only=True, return_predecessors=True)
+    graph = edge_graph(vertices, faces)
+    _, _, sources = dijkstra(graph, indices=chosen, min_only=True, return_predecessors=True)
     patch = np.searchsorted(np.sort(chosen), sources)
     order = np.argsort(chosen)
     return vertices[np.asarray(chosen)[order]], patch

@@ -18,7 +18,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from app.geometry.laplacian import mesh_operators
 from app.geometry.spectrum import eigenpairs
 from app.geometry.topology import face_areas
-from app.inference.template import faces_inside
+from app.inference.template import edge_graph, faces_inside
 from training.data.template import PART_NAMES, Template
 
 MIN_AREA_FRACTION = 0.1
@@ -47,11 +47,7 @@ class RegionSampler:
         operators = mesh_operators(v, f)
         self.vertex_area = operators.mass.diagonal()
         _, self.basis = eigenpairs(operators, MORPH_BASIS)
-        edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-        lengths = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
-        self.graph = sp.coo_matrix((lengths, (edges[:, 0], edges[:, 1])), shape=(len(v),) * 2).tocsr()
-        self.graph = self.graph.maximum(self.graph.T).tocsr()
-        self.graph.sort_indices()
+        self.graph = edge_graph(v, f)
         self._slot_faces = self._faces_of_graph_slots()
         self.generators: dict[str, Callable[[np.random.Generator], np.ndarray]] = {
             "parts": self.without_parts,
