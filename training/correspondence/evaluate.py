@@ -26,12 +26,13 @@ from app.geometry.descriptors import PartInputs
 from app.geometry.tangent import GradientStencil
 from app.inference.correspondence import CorrespondenceModel, Placement
 from app.inference.models import SpectralModels
-from app.inference.template import Template, part_coverage
+from app.inference.template import Template
 from training.correspondence.pairs import PAIR_SETS, VALIDATION_SETS, load_pairs
 from training.correspondence.parts import VARIANTS
 from training.correspondence.train import load_parts
 from training.data.spectra import task_spectrum
 from training.learning.baselines import elementwise_min
+from training.learning.masks import symmetric_scores
 from training.learning.spectral_errors import spectral_errors
 
 TEST_SETS = ("test_a", "test_b", "test_c")
@@ -53,9 +54,13 @@ class PartScore:
     localizer_coverage_error: float
 
 
-def iou(a: np.ndarray, b: np.ndarray, area: np.ndarray) -> float:
-    union = float(area[a | b].sum())
-    return float(area[a & b].sum()) / union if union > 0 else 1.0
+def region_scores(predicted: np.ndarray, truth: np.ndarray, template: Template, area: np.ndarray) -> tuple:
+    """(m, n) predicted template masks against one true mask (n,): the project's mask scores
+    (:func:`training.learning.masks.symmetric_scores`) taken as they are (plain: which side the
+    part lies on counts) and mirror-allowed."""
+    targets = np.repeat(truth[None], len(predicted), axis=0)
+    plain = symmetric_scores(predicted, targets, area, np.arange(len(truth)), template.labels)
+    return plain, symmetric_scores(predicted, targets, area, template.mirror, template.labels)
 
 
 def score_part(
@@ -74,21 +79,20 @@ def score_part(
     error = np.linalg.norm(placement.position - rest[target], axis=1)
     mirrored = np.linalg.norm(placement.position - rest[template.mirror[target]], axis=1)
     centroid = (vertex_area @ rest) / vertex_area.sum()
-    coverage = part_coverage(np.stack([truth, region, localized]), vertex_area, template.labels)
-    mirror = template.mirror
+    plain, mirror = region_scores(np.stack([region, localized]), truth, template, vertex_area)
     return PartScore(
         error_cm=100 * float(weight @ error),
         within_5=float(weight @ (error <= 0.05)),
         within_10=float(weight @ (error <= 0.10)),
         centroid_error_cm=100 * float(weight @ np.linalg.norm(centroid - rest[target], axis=1)),
         flipped=bool(weight @ mirrored < weight @ error),
-        iou=iou(region, truth, vertex_area),
-        iou_mirror=max(iou(region, truth, vertex_area), iou(region[mirror], truth, vertex_area)),
+        iou=float(plain.iou[0]),
+        iou_mirror=float(mirror.iou[0]),
         whole_body_iou=float(vertex_area[truth].sum() / vertex_area.sum()),
-        localizer_iou=iou(localized, truth, vertex_area),
-        localizer_iou_mirror=max(iou(localized, truth, vertex_area), iou(localized[mirror], truth, vertex_area)),
-        coverage_error=100 * float(np.abs(coverage[1] - coverage[0]).mean()),
-        localizer_coverage_error=100 * float(np.abs(coverage[2] - coverage[0]).mean()),
+        localizer_iou=float(plain.iou[1]),
+        localizer_iou_mirror=float(mirror.iou[1]),
+        coverage_error=100 * float(plain.coverage_error[0]),
+        localizer_coverage_error=100 * float(plain.coverage_error[1]),
     )
 
 
@@ -141,7 +145,6 @@ def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: Sp
     the true ones beside the elementwise minimum, and the union's region IoU beside the whole body
     and the spectral localizer (the union of the localized parts, as /v1/localize answers spectra)."""
     regions, n, area = served.template_regions, len(served.template.vertices), served.vertex_area
-    mirror = served.template.mirror
     rows = []
     for pair in load_pairs(parts_dir, name):
         a, b, union = (np.unpackbits(pair[f"mask_{s}"], count=n).astype(bool) for s in ("a", "b", "union"))
@@ -155,7 +158,9 @@ def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: Sp
         oracle = served.union(spectra, true, true_edge if served.reads_boundary else None).eigenvalues
         localized = np.zeros(n, bool)
         localized[served.localize(untold, spectra).vertices] = True
-        reached = placed[0].region | placed[1].region
+        plain, mirrored = region_scores(
+            np.stack([placed[0].region | placed[1].region, localized]), union, served.template, area
+        )
         rows.append(
             {
                 "kind": str(pair["kind"]),
@@ -167,10 +172,10 @@ def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: Sp
                 "told_measured": spectral_errors(told[None], truth)["mre"],
                 "told_truth": spectral_errors(oracle[None], truth)["mre"],
                 "elementwise_min": spectral_errors(elementwise_min(*(s[None] for s in spectra)), truth)["mre"],
-                "iou": iou(reached, union, area),
-                "iou_mirror": max(iou(reached, union, area), iou(reached[mirror], union, area)),
+                "iou": float(plain.iou[0]),
+                "iou_mirror": float(mirrored.iou[0]),
                 "whole_body_iou": float(area[union].sum() / area.sum()),
-                "localizer_iou_mirror": max(iou(localized, union, area), iou(localized[mirror], union, area)),
+                "localizer_iou_mirror": float(mirrored.iou[1]),
             }
         )
     return rows

@@ -19,16 +19,13 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from app.contract import CORRESPONDENCE_BASIS
-from app.geometry.descriptors import mesh_inputs
 from app.geometry.errors import GeometryError
-from app.geometry.validate import prepare_mesh
-from training.correspondence.parts import PartsPreset
+from training.correspondence.parts import PartsPreset, part_of
 from training.data.camera import scan_session
 from training.data.overlaps import CAMERA_CLOSE_UP, CAMERA_FAR, CAMERA_NEXT, CAMERA_POSE, CAMERA_RESCAN, ORBIT
 from training.data.pairs import OVERLAP, PARTIAL_UNION, sample_pair
 from training.data.regions import MAX_AREA_FRACTION
-from training.data.spectra import MESH, region_mesh, task_spectrum
+from training.data.spectra import MESH, task_spectrum
 from training.data.workers import mapped, run_tasks, sampler_of
 
 PAIR_SETS = ("pairs_b", "pairs_c")
@@ -128,7 +125,7 @@ def _row(sampler, shapes, kind: str, a: np.ndarray, b: np.ndarray, shape_a: int,
     if not all(np.isfinite(s).all() for s in spectra):
         return None
     try:
-        inputs = [_mesh_inputs(body, faces, mask) for body, mask in ((body_a, a), (body_b, b))]
+        inputs = [part_of(body, faces, mask, MESH)[0] for body, mask in ((body_a, a), (body_b, b))]
     except GeometryError:
         return None
     row = {"kind": kind, "spectrum_a": spectra[0], "spectrum_b": spectra[1], "union": spectra[2]}
@@ -136,11 +133,6 @@ def _row(sampler, shapes, kind: str, a: np.ndarray, b: np.ndarray, shape_a: int,
     for side, part in zip("ab", inputs, strict=True):
         row |= {f"{side}_{key}": value for key, value in part.feeds().items()}
     return row
-
-
-def _mesh_inputs(body: np.ndarray, faces: np.ndarray, mask: np.ndarray):
-    prepared = prepare_mesh(region_mesh(body, faces, mask), k=CORRESPONDENCE_BASIS, max_hole_edges=8)
-    return mesh_inputs(prepared.mesh.vertices, prepared.mesh.faces)
 
 
 def _stacked(rows: list[dict]) -> dict[str, np.ndarray]:

@@ -28,7 +28,7 @@ import trimesh
 from scipy.spatial import cKDTree
 from threadpoolctl import threadpool_limits
 
-from app.contract import CORRESPONDENCE_BASIS
+from app.contract import CORRESPONDENCE_BASIS, MAX_HOLE_EDGES
 from app.geometry.descriptors import PartInputs, cloud_inputs, mesh_inputs
 from app.geometry.errors import GeometryError
 from app.geometry.shapes import Mesh, PointCloud
@@ -207,7 +207,12 @@ def _body_mesh(key: bytes, sampler) -> trimesh.Trimesh:
 
 
 def part_of(
-    body: np.ndarray, faces: np.ndarray, mask: np.ndarray, variant: str, noisy: bool, rng: np.random.Generator
+    body: np.ndarray,
+    faces: np.ndarray,
+    mask: np.ndarray,
+    variant: str,
+    noisy: bool = False,
+    rng: np.random.Generator | None = None,
 ) -> tuple[PartInputs, np.ndarray]:
     """The inputs of the part of ``body`` inside ``mask`` as ``variant`` delivers it, and each of
     its vertices' template vertex (the nearest vertex of the posed region)."""
@@ -217,7 +222,7 @@ def part_of(
     mesh = Mesh(body[region], (np.cumsum(used) - 1)[inside])
     if variant == REMESHED:
         mesh = remeshed(mesh)
-    if noisy:
+    if noisy:  # ``rng`` draws the noise
         mesh = Mesh(mesh.vertices + rng.normal(0, NOISE_M, mesh.vertices.shape), mesh.faces)
     if variant == CLOUD:
         boundary = boundary_vertex_mask(mesh.faces, len(mesh.vertices))
@@ -230,7 +235,7 @@ def part_of(
         inputs = cloud_inputs(prepared.cloud.points, prepared.boundary)
         points = prepared.cloud.points
     else:
-        prepared_mesh = prepare_mesh(mesh, k=CORRESPONDENCE_BASIS, max_hole_edges=8)
+        prepared_mesh = prepare_mesh(mesh, k=CORRESPONDENCE_BASIS, max_hole_edges=MAX_HOLE_EDGES)
         points = prepared_mesh.mesh.vertices
         inputs = mesh_inputs(points, prepared_mesh.mesh.faces)
     _, nearest = cKDTree(body[region]).query(points)
