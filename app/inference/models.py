@@ -176,14 +176,15 @@ class SpectralModels:
         if self.localizer_session.get_inputs()[0].shape[1] != self.k:
             raise ValueError("union operator and localizer disagree on k")
         # The lumped mass of the spectrum code: the same area weights the models were scored with.
-        self.vertex_area = mesh_operators(self.template.vertices, self.template.faces).mass.diagonal()
+        operators = mesh_operators(self.template.vertices, self.template.faces)
+        self.vertex_area = operators.mass.diagonal()
         self.decoder_session = None
         if RECONSTRUCTION_FILE in checked:
             self.decoder_session = _session(directory / RECONSTRUCTION_FILE, threads)
             decoded = self.decoder_session.get_outputs()[0].shape
             if self.decoder_session.get_inputs()[0].shape[1] != self.k or decoded[1] != vertex_count:
                 raise ValueError("the shape decoder does not read this k or write this template")
-        self.template_regions = TemplateRegions(self.template, self.vertex_area)
+        self.template_regions = TemplateRegions(self.template, operators)
         self.correspondence = None
         if CORRESPONDENCE_FILE in checked:
             self.correspondence = CorrespondenceModel(directory / CORRESPONDENCE_FILE, self.template_regions, threads)

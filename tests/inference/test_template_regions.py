@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from app.geometry.laplacian import mesh_operators
-from app.inference.correspondence import CLOSING_M, REACH_M, TemplateRegions
+from app.inference.correspondence import TemplateRegions
 from app.inference.template import Template
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
@@ -16,7 +16,7 @@ MODELS = Path(__file__).resolve().parents[2] / "models"
 @pytest.fixture(scope="module")
 def regions() -> TemplateRegions:
     template = Template.load(MODELS)
-    return TemplateRegions(template, mesh_operators(template.vertices, template.faces).mass.diagonal())
+    return TemplateRegions(template, mesh_operators(template.vertices, template.faces))
 
 
 def _plane(regions: TemplateRegions, axis: int, share: float) -> np.ndarray:
@@ -24,25 +24,45 @@ def _plane(regions: TemplateRegions, axis: int, share: float) -> np.ndarray:
     return values >= np.quantile(values, 1 - share)
 
 
-def test_a_region_placed_exactly_is_reached_with_a_band_of_the_reach_around_it(regions):
-    """Every place on a template vertex: the region is reached whole (closing is extensive: a
-    vertex reached stays), and what is added lies within the reach (and closing) of it."""
+def _iou(regions: TemplateRegions, a: np.ndarray, b: np.ndarray) -> float:
+    area = regions.vertex_area
+    return float(area[a & b].sum() / area[a | b].sum())
+
+
+def test_a_region_placed_exactly_is_covered_with_its_outline_kept(regions):
+    """Every vertex placed on itself with its own area: the region is the part's, its outline
+    neither grown nor shrunk by more than the heat step's reach (a few template edges)."""
     mask = _plane(regions, 2, 0.4)
-    reached = regions.reached(regions.tree.data[mask])
-    assert np.all(reached[mask])
-    distance, _ = cKDTree(regions.tree.data[mask]).query(regions.tree.data[reached & ~mask])
-    assert distance.max() <= REACH_M + CLOSING_M
+    covered = regions.covered(np.flatnonzero(mask), regions.vertex_area[mask])
+    assert _iou(regions, covered, mask) > 0.95
+    distance, _ = cKDTree(regions.tree.data[mask]).query(regions.tree.data[covered ^ mask])
+    assert distance.max() <= 0.05
 
 
 def test_a_sparsely_placed_part_is_closed_into_its_region(regions):
-    """A coarse part (a quarter of the template's vertices placed, at random) covers its region,
-    not a scatter of points."""
+    """A coarse part (a quarter of the region's vertices placed, at random, each carrying four
+    vertices' area) covers its region, not a scatter of points."""
     mask = _plane(regions, 2, 0.4)
     rng = np.random.default_rng(0)
     sparse = rng.choice(np.flatnonzero(mask), size=mask.sum() // 4, replace=False)
-    reached = regions.reached(regions.tree.data[sparse])
-    area = regions.vertex_area
-    assert area[reached & mask].sum() > 0.98 * area[mask].sum()
+    covered = regions.covered(sparse, 4 * regions.vertex_area[sparse])
+    assert _iou(regions, covered, mask) > 0.95
+
+
+def test_the_region_does_not_depend_on_the_part_s_scale(regions):
+    """A bigger person's part (all areas ×2.5, or ×0.4) covers the same template region."""
+    mask = _plane(regions, 0, 0.3)
+    index, area = np.flatnonzero(mask), regions.vertex_area[mask]
+    same = regions.covered(index, area)
+    for factor in (2.5, 0.4):
+        assert _iou(regions, regions.covered(index, factor * area), same) > 0.97
+
+
+def test_a_part_of_a_few_vertices_still_covers_where_it_lands(regions):
+    """Three vertices carry too little area to be dense anywhere: they cover where they land."""
+    index = np.array([10, 2000, 4000])
+    covered = regions.covered(index, np.full(3, 1e-6))
+    assert np.flatnonzero(covered).tolist() == index.tolist()
 
 
 def test_overlap_share_hand_checked(regions):

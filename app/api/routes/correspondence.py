@@ -28,7 +28,7 @@ CONFIDENCE_DECIMALS = 3
 
 
 class CorrespondenceRegion(BaseModel):
-    vertices: list[int] = Field(description="Template vertices the part covers: those its vertices reach, closed.")
+    vertices: list[int] = Field(description="Template vertices the part covers: where its placed area lies dense.")
     area_fraction: float = Field(description="Share of the template's area covered.")
     part_coverage: dict[str, float] = Field(description="Covered share of each body part's area.")
     token: str = Field(
