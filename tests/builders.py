@@ -47,6 +47,13 @@ def glb_with_external_buffer(uri: str, mesh: Mesh) -> bytes:
     return _glb(gltf)
 
 
+def glb_of(mesh: Mesh, **position) -> bytes:
+    """A one-mesh GLB; ``position`` updates its POSITION accessor (to make it sparse, quantized)."""
+    gltf = _gltf(mesh, nodes=1)
+    gltf["accessors"][0].update(position)
+    return _glb(gltf, external_buffer(mesh))
+
+
 def instanced_glb(mesh: Mesh, nodes: int) -> bytes:
     """A GLB whose ``nodes`` scene nodes each place the one mesh it holds: small on the wire,
     ``nodes`` times the mesh once flattened."""

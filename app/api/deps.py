@@ -62,8 +62,8 @@ async def refuse_repeated_parameters(request: Request) -> None:
     silently, and two ``spectra`` fields for the second. FastAPI has already read the form by
     the time dependencies run, so ``request.form()`` is its cached parse, not a second one."""
     _refuse(request.query_params.multi_items(), "query parameter")
-    content_type = request.headers.get("content-type", "")
-    if content_type.startswith(("multipart/form-data", "application/x-www-form-urlencoded")):
+    media_type = request.headers.get("content-type", "").split(";")[0].strip().lower()  # as Starlette reads it
+    if media_type in ("multipart/form-data", "application/x-www-form-urlencoded"):
         fields = [(key, value) for key, value in (await request.form()).multi_items() if key not in REPEATABLE_FIELDS]
         _refuse(fields, "form field")
 

@@ -4,7 +4,20 @@ Each carries a stable ``slug`` that the API turns into a problem ``type``; the H
 belongs to the API layer, not here.
 """
 
+import re
+
 from app.core.errors import InputError
+
+MAX_REASON_CHARS = 200
+_PATH = re.compile(r"(?:[A-Za-z]:)?(?:[/\\][\w.+-]+){2,}(?::\d+)?")
+
+
+def library_reason(exc: BaseException) -> str:
+    """What a library said was wrong with the input, fit for a client: its first line, without
+    the file paths and line numbers of where the library was built, and short."""
+    first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+    plain = _PATH.sub("…", first)
+    return plain if len(plain) <= MAX_REASON_CHARS else plain[: MAX_REASON_CHARS - 1] + "…"
 
 
 class GeometryError(InputError):

@@ -21,6 +21,7 @@ from app.geometry.errors import (
     InvalidGeometry,
     UnreadableFile,
     UnsupportedFileType,
+    library_reason,
 )
 from app.geometry.shapes import Mesh, PointCloud, Shape
 
@@ -108,16 +109,30 @@ def load_shape(data: bytes, file_type: str, *, scale: float = 1.0, max_vertices:
     """
     if file_type not in ALLOWED_TYPES:
         raise UnsupportedFileType(f"file type {file_type!r} is not accepted")
-    if file_type == "npy":
-        shape = _load_npy(data)
-    else:
-        check_declared(data, file_type, max_vertices)
-        if file_type == "obj":
-            # Material libraries only colour the mesh; drop them so they are never looked up.
-            data = _OBJ_MATERIAL_LINE.sub(b"", data)
-        shape = _load_with_trimesh(data, "xyz" if file_type == "txt" else file_type, max_vertices)
+    try:
+        shape = _parsed(data, file_type, max_vertices)
+    except GeometryError:
+        raise
+    except Exception as exc:  # a reader's surprise is still the file's problem, never a 500
+        cause = _external_reference_in(exc)
+        if cause is not None:
+            raise cause from exc
+        raise UnreadableFile(f"could not parse the {file_type} file: {library_reason(exc)}") from exc
     _require_within_caps(shape, max_vertices)
     return _scaled(shape, scale)
+
+
+def _parsed(data: bytes, file_type: str, max_vertices: int) -> Shape:
+    """The shape the checked bytes hold, in the file's units."""
+    if file_type == "npy":
+        return _load_npy(data)
+    data = check_declared(data, file_type, max_vertices)
+    if file_type in ("xyz", "txt"):
+        return _load_text_points(data)
+    if file_type == "obj":
+        # Material libraries only colour the mesh; drop them so they are never looked up.
+        data = _OBJ_MATERIAL_LINE.sub(b"", data)
+    return _load_with_trimesh(data, file_type, max_vertices)
 
 
 def _require_within_caps(shape: Shape, max_vertices: int) -> None:
@@ -136,7 +151,7 @@ def _load_npy(data: bytes) -> PointCloud:
     try:
         points = np.load(io.BytesIO(data), allow_pickle=False)
     except Exception as exc:  # numpy raises several unrelated types for bad bytes
-        raise UnreadableFile(f"not a valid .npy file: {exc}") from exc
+        raise UnreadableFile(f"not a valid .npy file: {library_reason(exc)}") from exc
     if not isinstance(points, np.ndarray):  # np.load opens an .npz archive as a lazy mapping
         points.close()
         raise UnreadableFile("this is an .npz archive, not an .npy array: send the (n, 3) array itself")
@@ -149,22 +164,14 @@ def _load_npy(data: bytes) -> PointCloud:
 
 
 def _load_with_trimesh(data: bytes, file_type: str, max_vertices: int) -> Shape:
-    try:
-        scene = trimesh.load_scene(io.BytesIO(data), file_type=file_type, resolver=_RefusingResolver(), process=False)
-        geometries = list(scene.geometry.values())
-        if not geometries:
-            raise UnreadableFile(f"no geometry found in the {file_type} file")
-        if all(isinstance(g, trimesh.PointCloud) for g in geometries):
-            return _point_cloud_from(geometries)
-        _require_instances_within_caps(scene, max_vertices)
-        mesh = _flattened(scene)
-    except GeometryError:
-        raise
-    except Exception as exc:  # parsers raise anything from KeyError to struct.error on bad bytes
-        cause = _external_reference_in(exc)
-        if cause is not None:
-            raise cause from exc
-        raise UnreadableFile(f"could not parse the {file_type} file: {exc}") from exc
+    scene = trimesh.load_scene(io.BytesIO(data), file_type=file_type, resolver=_RefusingResolver(), process=False)
+    geometries = list(scene.geometry.values())
+    if not geometries:
+        raise UnreadableFile(f"no geometry found in the {file_type} file")
+    if all(isinstance(g, trimesh.PointCloud) for g in geometries):
+        return _point_cloud_from(geometries)
+    _require_instances_within_caps(scene, max_vertices)
+    mesh = _flattened(scene)
     faces, vertices = np.asarray(mesh.faces, dtype=np.int64), np.asarray(mesh.vertices, dtype=np.float64)
     if vertices.ndim != 2 or vertices.shape[1] != 3 or (faces.size and (faces.ndim != 2 or faces.shape[1] != 3)):
         # An OBJ line "v 0" leaves trimesh a (n, 1) or flat vertex array: no shape to read.
@@ -176,6 +183,41 @@ def _load_with_trimesh(data: bytes, file_type: str, max_vertices: int) -> Shape:
     if len(faces) == 0:
         return PointCloud(vertices)
     return Mesh(vertices, faces)
+
+
+def _load_text_points(data: bytes) -> PointCloud:
+    """An XYZ / TXT point cloud: one point a row, x y z first, every row as many columns as the
+    first, separated by whitespace or, when the first row has a comma, by commas; ``#`` starts a
+    comment and a first row of column names is skipped. A row that does not fit is refused
+    (decimal commas, a column more or less) rather than regrouped into other points."""
+    rows = [line for line in data.splitlines() if line.strip() and not line.lstrip().startswith(b"#")]
+    if not rows:
+        raise UnreadableFile("the point file holds no rows")
+    comma = b"," in rows[0]
+    names = not _is_number(rows[0].split(b"," if comma else None)[0])
+    try:
+        points = np.loadtxt(
+            io.BytesIO(b"\n".join(rows[1:] if names else rows)),
+            delimiter="," if comma else None,
+            comments="#",
+            ndmin=2,
+            dtype=np.float64,
+        )
+    except ValueError as exc:
+        reason = library_reason(exc).split("; use")[0]  # numpy's advice is for its own callers
+        hint = " (decimal commas? write 0.5, not 0,5)" if comma else ""
+        raise UnreadableFile(f"the point rows do not read as x y z rows: {reason}{hint}") from None
+    if points.shape[1] < 3:
+        raise UnreadableFile(f"a point row needs x, y and z; these rows hold {points.shape[1]} columns")
+    return PointCloud(np.ascontiguousarray(points[:, :3]))
+
+
+def _is_number(token: bytes) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
 
 
 def _flattened(scene: trimesh.Scene) -> trimesh.Trimesh:

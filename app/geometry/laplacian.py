@@ -13,7 +13,7 @@ import numpy as np
 import robust_laplacian
 import scipy.sparse as sp
 
-from app.geometry.errors import InvalidGeometry
+from app.geometry.errors import InvalidGeometry, library_reason
 from app.geometry.intrinsic import intrinsic_delaunay_operators
 
 # robust-laplacian's defaults, restated so the fast path refuses exactly what it would mollify.
@@ -51,7 +51,7 @@ def mesh_operators(vertices: np.ndarray, faces: np.ndarray) -> Operators:
             mollify_factor=MOLLIFY_FACTOR,
         )
     except RuntimeError as exc:  # the C++ core reports unusable input this way
-        raise InvalidGeometry(f"cannot build a Laplacian for this mesh: {exc}") from exc
+        raise InvalidGeometry(f"cannot build a Laplacian for this mesh: {library_reason(exc)}") from exc
     return Operators(stiffness.tocsr(), mass.tocsr())
 
 
@@ -66,5 +66,5 @@ def point_cloud_operators(points: np.ndarray) -> Operators:
             n_neighbors=POINT_CLOUD_NEIGHBOURS,
         )
     except RuntimeError as exc:
-        raise InvalidGeometry(f"cannot build a Laplacian for this point cloud: {exc}") from exc
+        raise InvalidGeometry(f"cannot build a Laplacian for this point cloud: {library_reason(exc)}") from exc
     return Operators(stiffness.tocsr(), mass.tocsr())

@@ -14,7 +14,7 @@ import qdldl
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-from app.geometry.errors import SolverFailure
+from app.geometry.errors import SolverFailure, library_reason
 from app.geometry.laplacian import Operators
 
 # The lowest shift sits below λ₁ = 0 of a closed surface by this fraction of 1/area, i.e. well
@@ -38,7 +38,7 @@ class Factor:
         try:
             self._solver = qdldl.Solver(upper, upper=True)
         except ValueError as exc:
-            raise SolverFailure(f"the eigen-solver failed on this shape: {exc}") from exc
+            raise SolverFailure(f"the eigen-solver failed on this shape: {library_reason(exc)}") from exc
         self.shift = shift
         n = upper.shape[0]
         self.operator = sla.LinearOperator((n, n), matvec=self._solver.solve, dtype=np.float64)
@@ -113,9 +113,9 @@ class ShiftedPencil:
                 maxiter=restarts,
             )
         except sla.ArpackNoConvergence as exc:
-            raise NoConvergence(f"the eigen-solver did not converge on this shape: {exc}") from exc
+            raise NoConvergence(f"the eigen-solver did not converge on this shape: {library_reason(exc)}") from exc
         except (ValueError, sla.ArpackError) as exc:
-            raise SolverFailure(f"the eigen-solver failed on this shape: {exc}") from exc
+            raise SolverFailure(f"the eigen-solver failed on this shape: {library_reason(exc)}") from exc
         values, standard_vectors = (result, None) if not vectors else result
         order = np.argsort(values)
         if standard_vectors is None:

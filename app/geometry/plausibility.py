@@ -28,14 +28,18 @@ def area_warnings(area_m2: float, scale_to_metres: float) -> list[str]:
 
 def size_warnings(spectra: list[np.ndarray], sources: list[str]) -> list[str]:
     """A warning when two operands differ in implied size (1/√mean λ) by more than MAX_SIZE_RATIO."""
-    lengths = [1 / np.sqrt(np.mean(spectrum[spectrum > 0])) for spectrum in spectra if np.any(spectrum > 0)]
-    if len(lengths) < 2:
+    sized = [
+        (1 / np.sqrt(np.mean(spectrum[spectrum > 0])), source)
+        for spectrum, source in zip(spectra, sources, strict=True)
+        if np.any(spectrum > 0)
+    ]
+    if len(sized) < 2:
         return []
-    large, small = int(np.argmax(lengths)), int(np.argmin(lengths))
-    ratio = lengths[large] / lengths[small]
+    (large, large_source), (small, small_source) = max(sized), min(sized)
+    ratio = large / small
     if ratio <= MAX_SIZE_RATIO:
         return []
     return [
-        f"{sources[large]} is {ratio:.0f}× the size of {sources[small]}, judged by their eigenvalues: "
+        f"{large_source} is {ratio:.0f}× the size of {small_source}, judged by their eigenvalues: "
         "a unit slip? (10× is cm against mm, 100× m against cm, 1000× m against mm)"
     ]

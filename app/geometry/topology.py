@@ -97,26 +97,49 @@ def drop_unreferenced(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarr
 
 
 def boundary_loops(half: np.ndarray) -> list[np.ndarray]:
-    """Closed loops as vertex sequences following boundary half-edges (from :func:`boundary_half_edges`).
+    """Closed loops as vertex sequences along boundary half-edges (from :func:`boundary_half_edges`).
 
-    Loops through a pinched vertex (two outgoing boundary edges) are ambiguous and left out,
-    so callers never modify a boundary they cannot trace unambiguously.
+    A loop is traced along its edges whatever way each points, and runs the way most of them
+    do: faces wound inconsistently (which the Laplacian does not mind) leave a hole's edges
+    pointing both ways, and the hole is still one. Loops through a pinched vertex (more than two
+    boundary edges) are ambiguous and left out, so callers never modify a boundary they cannot
+    trace unambiguously.
     """
-    starts, counts = np.unique(half[:, 0], return_counts=True)
-    pinched = set(starts[counts > 1].tolist())
-    successor = {int(a): int(b) for a, b in half if a not in pinched}
+    ends, counts = np.unique(half, return_counts=True)
+    pinched = set(ends[counts != 2].tolist())
+    neighbours: dict[int, list[int]] = {}
+    for a, b in half.tolist():
+        if a not in pinched and b not in pinched:
+            neighbours.setdefault(a, []).append(b)
+            neighbours.setdefault(b, []).append(a)
+    directed = set(map(tuple, half.tolist()))
     loops, visited = [], set()
-    for start in successor:
-        if start in visited:
+    for start in half[:, 0].tolist():
+        if start in visited or start not in neighbours:
             continue
-        loop, current = [], start
-        while current in successor and current not in visited:
-            visited.add(current)
-            loop.append(current)
-            current = successor[current]
-        if current == start:
+        loop = _traced(start, neighbours, directed, visited)
+        if loop is not None:
             loops.append(np.array(loop, dtype=np.int64))
     return loops
+
+
+def _traced(start: int, neighbours: dict[int, list[int]], directed: set, visited: set) -> list[int] | None:
+    """The loop through ``start``, first along the edge its face leaves it by, the way most of
+    its edges point; None when the walk does not come back to ``start``."""
+    first = next((b for b in neighbours[start] if (start, b) in directed), neighbours[start][0])
+    loop, previous, current = [start], start, first
+    visited.add(start)
+    while current != start and current not in visited:
+        visited.add(current)
+        loop.append(current)
+        ways = neighbours.get(current, [])
+        if len(ways) != 2:  # an edge of it runs to a pinched vertex: not a loop to trace
+            return None
+        previous, current = current, (ways[1] if ways[0] == previous else ways[0])
+    if current != start or len(loop) < 3:
+        return None
+    along = sum((u, v) in directed for u, v in zip(loop, loop[1:] + loop[:1], strict=True))
+    return loop if 2 * along >= len(loop) else loop[::-1]
 
 
 def cap_faces(loop: np.ndarray, centre: int) -> np.ndarray:

@@ -80,6 +80,14 @@ def test_a_repeated_form_field_is_a_422_and_repeated_files_are_operands(client):
     assert len(response.json()["operands"]) == 2
 
 
+def test_a_repeated_form_field_is_a_422_whatever_the_media_type_s_case(client):
+    """Starlette reads 'Multipart/Form-Data' as a form; so does the check for repeats."""
+    body = b'--b\r\nContent-Disposition: form-data; name="spectra"\r\n\r\n[[1, 2]]\r\n' * 2 + b"--b--\r\n"
+    headers = {"content-type": "Multipart/Form-Data; boundary=b"}
+    response = client.post("/v1/union", content=body, headers=headers)
+    assert "spectra given more than once" in assert_problem(response, 422, "invalid-request")["detail"]
+
+
 def test_a_shape_scaled_to_nothing_is_a_422_not_a_spectrum_of_1e60(client):
     patch = mesh_bytes(bumpy_patch(seed=1, n=300), "ply")
     response = post(client, "tiny.ply", patch, scale=1e-30)

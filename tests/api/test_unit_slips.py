@@ -5,7 +5,7 @@ import json
 
 import numpy as np
 
-from app.geometry.plausibility import MAX_SIZE_RATIO, PLAUSIBLE_AREA_M2
+from app.geometry.plausibility import MAX_SIZE_RATIO, PLAUSIBLE_AREA_M2, size_warnings
 from tests.api.test_spectrum_api import post
 from tests.builders import mesh_bytes
 from tests.conftest import bumpy_patch
@@ -43,3 +43,12 @@ def test_a_file_operands_warning_is_carried_into_the_union_and_retrieval(client)
         warnings = client.post(route, data=form, files=files).json()["warnings"]
         assert any(w.startswith("files[0] slip.ply: the shape's area") for w in warnings), (route, warnings)
         assert any("1000× the size of" in w for w in warnings), (route, warnings)
+
+
+def test_the_size_warning_names_the_operands_it_compares():
+    """An operand without a positive eigenvalue takes no part, and does not shift the names:
+    [zeros, A, A of a body 100× smaller] names spectra[2] against spectra[1]."""
+    spectrum = np.linspace(1.0, 20.0, 20)
+    sources = ["spectra[0]", "spectra[1]", "spectra[2]"]
+    (warning,) = size_warnings([np.zeros(20), spectrum, 1e4 * spectrum], sources)
+    assert warning.startswith("spectra[1] is 100× the size of spectra[2]")

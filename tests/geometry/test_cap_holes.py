@@ -46,3 +46,21 @@ def test_cap_holes_is_for_meshes_a_point_cloud_is_declared_closed_instead(sphere
     cloud = PointCloud(np.asarray(sphere.vertices), None)
     with pytest.raises(InputError, match="declare it closed"):
         cloud_spectrum(cloud, SpectrumOptions(k=5, cap_holes=True))
+
+
+def _wound_both_ways(mesh: Mesh) -> Mesh:
+    """Every other face turned over: the same surface and the same Laplacian, its holes' edges
+    pointing both ways."""
+    faces = mesh.faces.copy()
+    faces[::2] = faces[::2, ::-1]
+    return Mesh(mesh.vertices, faces)
+
+
+def test_holes_of_a_mesh_wound_both_ways_are_found_and_capped_as_when_wound_one_way(sphere, polar_hole):
+    """Mixed winding left no traceable loop: nothing capped, λ₁ 23.8 where the closed surface has 0."""
+    one_way = mesh_spectrum(polar_hole, SpectrumOptions(k=9, cap_holes=True))
+    both_ways = mesh_spectrum(_wound_both_ways(polar_hole), SpectrumOptions(k=9, cap_holes=True))
+    assert both_ways.holes_filled == one_way.holes_filled == 1
+    np.testing.assert_allclose(both_ways.eigenvalues, one_way.eigenvalues, rtol=1e-6, atol=1e-8)
+    pinhole = Mesh(np.asarray(sphere.vertices), np.asarray(sphere.faces)[1:])  # one face missing
+    assert mesh_spectrum(_wound_both_ways(pinhole), SpectrumOptions(k=5)).holes_filled == 1
