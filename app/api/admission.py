@@ -5,19 +5,24 @@ Counting uploads once they were parsed meant an overloaded server first received
 two-file union could have its first file solved and its second refused. Here a request that
 carries a multipart body (every route that solves an upload takes one; a spectra-only form
 is one too and passes in milliseconds) is counted in on its headers, whole: at most
-``capacity`` such requests are in flight (solving or waiting for a solver), and their declared
-bodies together stay under ``byte_budget`` (a chunked body, of unknown length, is charged the
-upload cap). The rest get 503 ``overloaded`` with ``Retry-After`` at once, their bodies unread.
+``capacity`` such requests are in flight (solving or waiting for a solver), and their bodies
+together stay under ``byte_budget``. A body is charged as its bytes arrive, after a reservation
+of at most :data:`RESERVATION_BYTES` on admission: charged its declared length (or the upload cap
+when chunked) up front, eight connections sending a byte every 5 s held the whole budget and
+every other upload was refused for a minute. The rest get 503 ``overloaded`` with
+``Retry-After`` at once, their bodies unread, and ``/metrics`` counts them by what was full.
 A route that solves a shape of its own whatever its body holds (``/v1/reconstruct`` checks the
 body it rebuilt) is counted in the same way on any body, URL-encoded spectra included, so that
 no request reaches the solvers' queue uncounted.
 """
 
-from starlette.types import ASGIApp, Receive, Scope, Send
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from app.api.metrics import UPLOADS_IN_FLIGHT
+from app.api.metrics import UPLOAD_BYTES_IN_FLIGHT, UPLOADS_IN_FLIGHT, UPLOADS_REFUSED
 from app.api.problems import problem_response
 from app.api.solver import RETRY_AFTER_SECONDS
+
+RESERVATION_BYTES = 1024 * 1024  # charged on admission; the body's bytes past it as they arrive
 
 
 class AdmissionMiddleware:
@@ -45,20 +50,37 @@ class AdmissionMiddleware:
         if not (multipart or (scope["type"] == "http" and scope["path"] in self.solving_paths)):
             await self.app(scope, receive, send)
             return
-        charge = _declared_length(headers, self.max_body_bytes)
+        charge = min(_declared_length(headers, self.max_body_bytes), RESERVATION_BYTES)
         # No await between the check and the count: concurrent requests cannot all slip past.
         if self.requests >= self.capacity or self.bytes + charge > self.byte_budget:
+            UPLOADS_REFUSED.labels("requests" if self.requests >= self.capacity else "bytes").inc()
             await self._refuse(scope, receive, send)
             return
         self.requests += 1
-        self.bytes += charge
         UPLOADS_IN_FLIGHT.inc()
+        self._charge(charge)
+        received = 0
+
+        async def counted_receive() -> Message:
+            nonlocal received, charge
+            message = await receive()
+            if message["type"] == "http.request":
+                received += len(message.get("body", b""))
+                if received > charge:
+                    self._charge(received - charge)
+                    charge = received
+            return message
+
         try:
-            await self.app(scope, receive, send)
+            await self.app(scope, counted_receive, send)
         finally:
             self.requests -= 1
-            self.bytes -= charge
+            self._charge(-charge)
             UPLOADS_IN_FLIGHT.dec()
+
+    def _charge(self, count: int) -> None:
+        self.bytes += count
+        UPLOAD_BYTES_IN_FLIGHT.set(self.bytes)
 
     async def _refuse(self, scope: Scope, receive: Receive, send: Send) -> None:
         detail = (

@@ -18,6 +18,15 @@ LATENCY = Histogram("spectral_unions_request_seconds", "Time to answer a request
 UPLOADS_IN_FLIGHT = Gauge(
     "spectral_unions_upload_requests_in_flight", "Upload requests admitted and not yet answered (app.api.admission)."
 )
+UPLOAD_BYTES_IN_FLIGHT = Gauge(
+    "spectral_unions_upload_bytes_in_flight",
+    "Body bytes of the admitted upload requests, received so far or reserved (app.api.admission).",
+)
+UPLOADS_REFUSED = Counter(
+    "spectral_unions_uploads_refused_total",
+    "Upload requests refused 503 at admission, by what was full: requests or bytes.",
+    ["full"],
+)
 SOLVES = Histogram(
     "spectral_unions_solve_seconds",
     "Laplacian assembly plus eigen-solve of one shape.",

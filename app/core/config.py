@@ -51,7 +51,7 @@ class Settings(BaseSettings):
     max_inflight_upload_bytes: int = Field(
         512 * 1024 * 1024,
         gt=0,
-        description="Declared bodies of the upload requests in flight, together; beyond, 503 overloaded.",
+        description="Body bytes of the upload requests in flight, counted as they arrive; beyond, 503 overloaded.",
     )
     body_timeout_seconds: float = Field(
         60.0, gt=0, description="Time a client has to send a request body once its headers arrived; beyond, 408."

@@ -156,3 +156,52 @@ def test_a_route_that_may_solve_is_counted_in_even_with_url_encoded_spectra(serv
     answered = httpx.post(f"http://127.0.0.1:{server}{route}", data=spectra, timeout=60)
     assert answered.status_code == 200, answered.text
     assert _solves(server) == before + 1
+
+
+@pytest.fixture(scope="module")
+def budgeted_server(tmp_path_factory):
+    """Room for four uploads, and bytes in flight for one body of the upload cap and a half."""
+    port = free_port()
+    settings = {
+        "SPECTRAL_UNIONS_DATABASE_PATH": str(tmp_path_factory.mktemp("db") / "shapes.sqlite"),
+        "SPECTRAL_UNIONS_MAX_QUEUED_SOLVES": "3",
+        "SPECTRAL_UNIONS_MAX_INFLIGHT_UPLOAD_BYTES": str(96 * 1024 * 1024),
+        "SPECTRAL_UNIONS_BODY_TIMEOUT_SECONDS": str(BODY_TIMEOUT_S),
+    }
+    process = start(port, settings)
+    try:
+        wait_ready(f"http://127.0.0.1:{port}", process)
+        yield port
+    finally:
+        process.kill()
+        process.wait(timeout=30)
+
+
+def _trickle(port: int) -> socket.socket:
+    """A chunked multipart POST (no declared length) that has sent one byte of its body."""
+    connection = socket.create_connection(("127.0.0.1", port), timeout=30)
+    head = (
+        "POST /v1/spectrum HTTP/1.1\r\nHost: test\r\nContent-Type: multipart/form-data; boundary=b\r\n"
+        "Transfer-Encoding: chunked\r\n\r\n1\r\n-\r\n"
+    )
+    connection.sendall(head.encode())
+    return connection
+
+
+def test_slow_bodies_are_charged_what_they_sent_not_the_upload_cap(budgeted_server):
+    """Each chunked body was charged the 64 MiB cap on admission: two that trickled held the
+    budget, and every other upload was refused until they timed out. Charged as their bytes
+    arrive, both are admitted and an honest upload beside them is answered."""
+    port = budgeted_server
+    holders = [_trickle(port) for _ in range(2)]
+    try:
+        deadline = time.monotonic() + 30
+        while _metric(port, "spectral_unions_upload_requests_in_flight") < 2 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert _metric(port, "spectral_unions_upload_requests_in_flight") == 2
+        assert _metric(port, "spectral_unions_upload_bytes_in_flight") <= 2 * 1024 * 1024
+        response = httpx.post(f"http://127.0.0.1:{port}/v1/spectrum", files={"file": ("p.ply", patch_ply())})
+        assert response.status_code == 200, response.text
+    finally:
+        _release(port, holders)
+    assert _metric(port, "spectral_unions_upload_bytes_in_flight") == 0
