@@ -21,21 +21,25 @@ BODY_TIMEOUT_S = 5
 CAPACITY = 2  # one solve slot and one waiting place
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
+def _serving(tmp_path_factory, **settings: str):
+    """A live server with the body deadline of these tests and ``settings`` (environment names)."""
     port = free_port()
-    settings = {
+    environment = {
         "SPECTRAL_UNIONS_DATABASE_PATH": str(tmp_path_factory.mktemp("db") / "shapes.sqlite"),
-        "SPECTRAL_UNIONS_MAX_QUEUED_SOLVES": str(CAPACITY - 1),
         "SPECTRAL_UNIONS_BODY_TIMEOUT_SECONDS": str(BODY_TIMEOUT_S),
-    }
-    process = start(port, settings)
+    } | settings
+    process = start(port, environment)
     try:
         wait_ready(f"http://127.0.0.1:{port}", process)
         yield port
     finally:
         process.kill()
         process.wait(timeout=30)
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    yield from _serving(tmp_path_factory, SPECTRAL_UNIONS_MAX_QUEUED_SOLVES=str(CAPACITY - 1))
 
 
 def _stalled_upload(port: int, path: str = "/v1/spectrum", body: bytes = b"--b\r\n") -> socket.socket:
@@ -161,20 +165,11 @@ def test_a_route_that_may_solve_is_counted_in_even_with_url_encoded_spectra(serv
 @pytest.fixture(scope="module")
 def budgeted_server(tmp_path_factory):
     """Room for four uploads, and bytes in flight for one body of the upload cap and a half."""
-    port = free_port()
-    settings = {
-        "SPECTRAL_UNIONS_DATABASE_PATH": str(tmp_path_factory.mktemp("db") / "shapes.sqlite"),
-        "SPECTRAL_UNIONS_MAX_QUEUED_SOLVES": "3",
-        "SPECTRAL_UNIONS_MAX_INFLIGHT_UPLOAD_BYTES": str(96 * 1024 * 1024),
-        "SPECTRAL_UNIONS_BODY_TIMEOUT_SECONDS": str(BODY_TIMEOUT_S),
-    }
-    process = start(port, settings)
-    try:
-        wait_ready(f"http://127.0.0.1:{port}", process)
-        yield port
-    finally:
-        process.kill()
-        process.wait(timeout=30)
+    yield from _serving(
+        tmp_path_factory,
+        SPECTRAL_UNIONS_MAX_QUEUED_SOLVES="3",
+        SPECTRAL_UNIONS_MAX_INFLIGHT_UPLOAD_BYTES=str(96 * 1024 * 1024),
+    )
 
 
 def _trickle(port: int) -> socket.socket:
