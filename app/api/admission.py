@@ -11,6 +11,12 @@ of at most :data:`RESERVATION_BYTES` on admission: charged its declared length (
 when chunked) up front, eight connections sending a byte every 5 s held the whole budget and
 every other upload was refused for a minute. The rest get 503 ``overloaded`` with
 ``Retry-After`` at once, their bodies unread, and ``/metrics`` counts them by what was full.
+
+A place is one solve. A request is admitted on one place and takes one more for each further
+file it solves, once its form is read and before any solve starts (:func:`take_solves`), as far
+as places remain: a union of 32 files held one place and queued 32 solves, and an upload behind
+it waited 12 s; now it holds every place it can, and the uploads after it are refused at once.
+An admitted request is never refused for its own size.
 A route that solves a shape of its own whatever its body holds (``/v1/reconstruct`` checks the
 body it rebuilt) is counted in the same way on any body, URL-encoded spectra included, so that
 no request reaches the solvers' queue uncounted.
@@ -23,6 +29,28 @@ from app.api.problems import problem_response
 from app.api.solver import RETRY_AFTER_SECONDS
 
 RESERVATION_BYTES = 1024 * 1024  # charged on admission; the body's bytes past it as they arrive
+
+
+class Ticket:
+    """An admitted request's places in :class:`AdmissionMiddleware` (``request.state.admission``)."""
+
+    def __init__(self, gate: "AdmissionMiddleware") -> None:
+        self.gate = gate
+        self.places = 1
+
+    def take(self, solves: int) -> None:
+        """Hold a place for each of ``solves``, beyond those held, as far as places remain."""
+        extra = max(0, min(solves - self.places, self.gate.capacity - self.gate.places))
+        self.gate.places += extra
+        self.places += extra
+
+
+def take_solves(state: object, solves: int) -> None:
+    """Charge a request's admission ticket (its ``request.state``) for ``solves`` solves; a
+    request the middleware did not count (no multipart body) has none and pays nothing."""
+    ticket = getattr(state, "admission", None)
+    if ticket is not None:
+        ticket.take(solves)
 
 
 class AdmissionMiddleware:
@@ -41,7 +69,7 @@ class AdmissionMiddleware:
         self.capacity = capacity
         self.byte_budget = byte_budget
         self.max_body_bytes = max_body_bytes
-        self.requests = 0
+        self.places = 0
         self.bytes = 0
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
@@ -52,11 +80,13 @@ class AdmissionMiddleware:
             return
         charge = min(_declared_length(headers, self.max_body_bytes), RESERVATION_BYTES)
         # No await between the check and the count: concurrent requests cannot all slip past.
-        if self.requests >= self.capacity or self.bytes + charge > self.byte_budget:
-            UPLOADS_REFUSED.labels("requests" if self.requests >= self.capacity else "bytes").inc()
+        if self.places >= self.capacity or self.bytes + charge > self.byte_budget:
+            UPLOADS_REFUSED.labels("requests" if self.places >= self.capacity else "bytes").inc()
             await self._refuse(scope, receive, send)
             return
-        self.requests += 1
+        ticket = Ticket(self)
+        self.places += 1
+        scope.setdefault("state", {})["admission"] = ticket
         UPLOADS_IN_FLIGHT.inc()
         self._charge(charge)
         received = 0
@@ -74,7 +104,7 @@ class AdmissionMiddleware:
         try:
             await self.app(scope, counted_receive, send)
         finally:
-            self.requests -= 1
+            self.places -= ticket.places
             self._charge(-charge)
             UPLOADS_IN_FLIGHT.dec()
 
@@ -84,7 +114,7 @@ class AdmissionMiddleware:
 
     async def _refuse(self, scope: Scope, receive: Receive, send: Send) -> None:
         detail = (
-            f"{self.requests} upload requests ({self.bytes} bytes) are already being received or solved; "
+            f"{self.places} solves ({self.bytes} bytes of their uploads) are already being received or run; "
             f"retry after {RETRY_AFTER_SECONDS} s."
         )
         response = problem_response(503, "overloaded", "Overloaded", detail)

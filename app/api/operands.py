@@ -15,6 +15,7 @@ from typing import Annotated, Literal
 from fastapi import File, Form, Query, Request, UploadFile
 
 from app.api import form_json
+from app.api.admission import take_solves
 from app.api.problems import ProblemError
 from app.api.solver import SolverPool
 from app.core.config import Settings
@@ -264,6 +265,7 @@ async def _solve_all(
     is reported for the first failing file whatever order the workers finish in."""
 
     solver: SolverPool = request.app.state.solver
+    take_solves(request.state, len(files))
 
     async def solve(upload: UploadFile) -> Solved:
         data = await upload.read()

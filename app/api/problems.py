@@ -108,7 +108,7 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
         (
             "overloaded",
             "Overloaded",
-            "18 upload requests (6291456 bytes) are already being received or solved; retry after 1 s.",
+            "18 solves (6291456 bytes of their uploads) are already being received or run; retry after 1 s.",
         ),
         ("solver-crashed", "Solver crashed", "the solver process stopped while solving this shape (…); retry."),
         ("upload-storage-full", "Upload storage full", "the server has no temporary space left to receive this upload"),
