@@ -20,6 +20,7 @@ import selenium.webdriver as webdriver
 import trimesh
 from PIL import Image
 from selenium.webdriver.chrome.service import Service
+from selenium.webdriver.common.action_chains import ActionChains
 from selenium.webdriver.common.by import By
 from selenium.webdriver.support.ui import WebDriverWait
 
@@ -178,6 +179,27 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
 
     if os.environ.get("SESSION_SCREENSHOT"):
         browser.save_screenshot(os.environ["SESSION_SCREENSHOT"])
+
+
+def _drawn(canvas) -> np.ndarray:
+    """(h, w) bool: the canvas's pixels that are not the background."""
+    pixels = np.asarray(Image.open(io.BytesIO(canvas.screenshot_as_png)).convert("RGB")).astype(int)
+    return np.abs(pixels - BACKGROUND).sum(axis=2) > 30
+
+
+def test_a_horizontal_drag_turns_the_body_about_its_upright_axis(base, scans, browser):
+    """The orbit axis is the body's own (+z): a horizontal drag turns the body where it stands
+    (the picture changes, its height on screen does not); the controls once fixed their axis
+    before the camera was told which way is up, and the drag did nothing."""
+    _drop_one_at_a_time(browser, base, scans[:1])
+    canvas = browser.find_element(By.ID, "body")
+    before = _drawn(canvas)
+    ActionChains(browser).move_to_element(canvas).click_and_hold().move_by_offset(120, 0).release().perform()
+    after = _drawn(canvas)
+    rows_before, rows_after = np.flatnonzero(before.any(axis=1)), np.flatnonzero(after.any(axis=1))
+    assert np.mean(before != after) > 0.01  # it turned
+    height_before, height_after = np.ptp(rows_before), np.ptp(rows_after)
+    assert abs(height_after - height_before) <= 0.1 * height_before  # and stands as it stood
 
 
 def test_a_registered_session_measures_each_scan_s_overlap_and_tells_the_union(base, scans, browser):

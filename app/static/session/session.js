@@ -168,6 +168,7 @@ function viewer(canvas, material) {
   light.position.set(1, 2, 3);
   scene.add(light);
   const camera = new THREE.PerspectiveCamera(35, canvas.width / canvas.height, 0.01, 100);
+  camera.up.set(0, 0, 1); // bodies stand along +z; OrbitControls fixes its orbit axis from camera.up when made
   const controls = new OrbitControls(camera, renderer.domElement);
   controls.addEventListener("change", () => renderer.render(scene, camera));
   let mesh = null;
@@ -182,7 +183,6 @@ function viewer(canvas, material) {
         geometry.computeBoundingSphere();
         const { center, radius } = geometry.boundingSphere;
         controls.target.copy(center);
-        camera.up.set(0, 0, 1); // bodies stand along +z
         camera.position.set(center.x, center.y - 3.2 * radius, center.z);
         controls.update();
       }
