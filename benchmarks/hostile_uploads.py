@@ -15,6 +15,13 @@ the service on a free port with its defaults (a solver worker per core), then ru
 2. **burst**: ``--burst`` concurrent uploads of the normal file on an idle server, ``--rounds``
    times, each sent as curl sends a large body (``Expect: 100-continue``: the body follows the
    server's 100 only): how many were served and how many refused (503), and the latencies.
+3. **probe**: each file of an independent probe that was misread, a 500 or dear to refuse,
+   sent once (counts of thousands of digits, a PLY read two ways, unbudgeted text, decimal
+   commas, byte-order marks, GLB storage trimesh misreads, faces wound both ways): its status,
+   problem type and time, and whether any answer was a 5xx.
+4. **crowd**: a union of ``--union-files`` parts, and while its solves run a normal upload;
+   then eight chunked bodies that trickle a byte at a time, and a normal upload beside them:
+   what the normal uploads got, and how long they took.
 
 Figures go in ``docs/reliability.md``.
 """
@@ -39,7 +46,7 @@ from app.geometry.shapes import Mesh
 from app.inference.template import Template
 from app.samples import template_part
 from tests.api.servers import start, wait_ready
-from tests.builders import instanced_glb, mesh_bytes
+from tests.builders import glb_of, instanced_glb, mesh_bytes
 from tests.postgres import free_port
 
 
@@ -65,6 +72,116 @@ def hostile_files() -> dict[str, tuple[str, bytes]]:
         "20k fins on an edge": ("fins.ply", mesh_bytes(finned, "ply")),
         "30k-instance GLB": ("nodes.glb", instanced_glb(Mesh(sphere.vertices, sphere.faces), 30_000)),
         "3 vertices + 15M lines": ("long.ply", header + b"0\n" * 15_000_000),
+    }
+
+
+def probe_files(part: bytes) -> dict[str, tuple[str, bytes]]:
+    """The probe's reproducers, each under the default 64 MiB cap: name → (file name, bytes)."""
+    xyz_header = b"property float x\nproperty float y\nproperty float z\n"
+    digits = b"9" * 5000
+    patch = _disk(400)
+    wound = Mesh(patch.vertices, patch.faces.copy())
+    wound.faces[::2] = wound.faces[::2, ::-1]
+    sphere = trimesh.creation.icosphere(subdivisions=1)
+    ball = Mesh(sphere.vertices, sphere.faces)
+    facet = b"facet normal 0 0 1\nouter loop\n" + b"vertex 0 0 0\n" * 3 + b"endloop\nendfacet\n"
+    return {
+        "PLY vertex count of 5000 digits": (
+            "d.ply",
+            b"ply\nformat ascii 1.0\nelement vertex " + digits + b"\n" + xyz_header + b"end_header\n",
+        ),
+        "OFF count of 5000 digits": ("d.off", b"OFF\n" + digits + b" 1 0\n0 0 0\n"),
+        "'comment ascii' binary PLY, 10M text rows": (
+            "trick.ply",
+            b"ply\ncomment ascii\nformat binary_little_endian 1.0\nelement vertex 10000000\n"
+            + xyz_header
+            + b"end_header\n"
+            + b"0 0 0\n" * 10_000_000,
+        ),
+        "OBJ of 7.5M v lines": ("many.obj", b"v 0 0 0\n" * 7_500_000),
+        "OBJ face line of 8M indices": ("face.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf " + b"1 2 3 " * 2_700_000 + b"\n"),
+        "XYZ line of 30M tokens": ("line.xyz", b"0 " * 30_000_000 + b"\n"),
+        "XYZ 100k rows of 200 tokens": ("wide.xyz", (b"0 " * 200 + b"\n") * 100_000),
+        "ASCII STL of 600k facets": ("many.stl", b"solid x\n" + facet * 600_000 + b"endsolid x\n"),
+        "XYZ with decimal commas": (
+            "comma.xyz",
+            b"".join(b"0,%d 0,%d 0,%d\n" % (i, i + 1, i + 2) for i in range(1000)),
+        ),
+        "XYZ of 3 then 4 columns": ("cols.xyz", b"0 0 0\n" + b"".join(b"%d 1 0 1\n" % i for i in range(1000))),
+        "OBJ with a byte-order mark": ("bom.obj", b"\xef\xbb\xbf" + mesh_bytes(patch, "obj")),
+        "GLB with a sparse accessor": (
+            "sparse.glb",
+            glb_of(
+                ball,
+                sparse={"count": 1, "indices": {"bufferView": 1, "componentType": 5125}, "values": {"bufferView": 0}},
+            ),
+        ),
+        "GLB with quantized positions": ("quantized.glb", glb_of(ball, componentType=5122, normalized=True)),
+        "a hole in faces wound both ways, cap_holes": ("wound.ply", mesh_bytes(wound, "ply")),
+        "the normal part": ("part.ply", part),
+    }
+
+
+async def probe_scenario(url: str, part: bytes) -> dict:
+    rows = {}
+    async with httpx.AsyncClient(timeout=300) as http:
+        for label, (name, data) in probe_files(part).items():
+            params = {"cap_holes": "true"} if "cap_holes" in label else {}
+            started = time.perf_counter()
+            response = await http.post(f"{url}/v1/spectrum", params=params, files={"file": (name, data)})
+            elapsed = time.perf_counter() - started
+            answer = response.json()
+            rows[label] = {
+                "bytes": len(data),
+                "status": response.status_code,
+                "type": answer.get("type", ""),
+                "ms": round(1e3 * elapsed, 1),
+                "holes_filled": answer.get("holes_filled"),
+            }
+    return {"files": rows, "server_errors": sum(row["status"] >= 500 for row in rows.values())}
+
+
+async def _trickle(port: int, stop: asyncio.Event) -> None:
+    """A chunked upload that sends one byte every second until ``stop``."""
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    writer.write(
+        b"POST /v1/spectrum HTTP/1.1\r\nHost: x\r\nContent-Type: multipart/form-data; boundary=b\r\n"
+        b"Transfer-Encoding: chunked\r\n\r\n"
+    )
+    try:
+        while not stop.is_set():
+            writer.write(b"1\r\n-\r\n")
+            await writer.drain()
+            await asyncio.sleep(1.0)
+    except OSError:
+        pass
+    finally:
+        writer.close()
+
+
+async def _timed_upload(http: httpx.AsyncClient, url: str, part: bytes) -> dict:
+    started = time.perf_counter()
+    response = await http.post(f"{url}/v1/spectrum", files={"file": ("part.ply", part)})
+    return {"status": response.status_code, "ms": round(1e3 * (time.perf_counter() - started), 1)}
+
+
+async def crowd_scenario(url: str, port: int, part: bytes, union_files: int) -> dict:
+    async with httpx.AsyncClient(timeout=300) as http:
+        files = [("files", (f"p{i}.ply", part)) for i in range(union_files)]
+        union = asyncio.create_task(http.post(f"{url}/v1/union", files=files))
+        await asyncio.sleep(1.0)  # its form read, its solves under way
+        beside_union = await _timed_upload(http, url, part)
+        union_status = (await union).status_code
+        stop = asyncio.Event()
+        trickles = [asyncio.create_task(_trickle(port, stop)) for _ in range(8)]
+        await asyncio.sleep(2.0)
+        beside_trickles = await _timed_upload(http, url, part)
+        stop.set()
+        await asyncio.gather(*trickles)
+    return {
+        "union_status": union_status,
+        "upload_beside_the_union": beside_union,
+        "upload_beside_8_trickling_bodies": beside_trickles,
     }
 
 
@@ -181,7 +298,8 @@ def main() -> None:
     parser.add_argument("--attackers", type=int, default=2, help="clients sending the hostile files")
     parser.add_argument("--burst", type=int, default=64, help="concurrent uploads of the burst")
     parser.add_argument("--rounds", type=int, default=3, help="bursts, each on an idle server")
-    parser.add_argument("--only", choices=["loop", "burst"], help="run one scenario only")
+    parser.add_argument("--union-files", type=int, default=32, help="crowd: files in the union")
+    parser.add_argument("--only", choices=["loop", "burst", "probe", "crowd"], help="run one scenario only")
     parser.add_argument(
         "--control", action="store_true", help="loop: the other clients send the normal file instead (the baseline)"
     )
@@ -209,6 +327,10 @@ def main() -> None:
                 report["burst"] = rounds
             if args.only in (None, "loop"):
                 report["loop"] = asyncio.run(loop_scenario(url, body, args))
+            if args.only in (None, "probe"):
+                report["probe"] = asyncio.run(probe_scenario(url, body))
+            if args.only in (None, "crowd"):
+                report["crowd"] = asyncio.run(crowd_scenario(url, port, body, args.union_files))
         finally:
             server.terminate()
             server.wait(timeout=60)

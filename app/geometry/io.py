@@ -31,6 +31,7 @@ POINT_TYPES = frozenset({"xyz", "txt", "npy"})
 ALLOWED_TYPES = MESH_TYPES | POINT_TYPES
 
 UNIT_TO_METRES = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+MAX_POINT_COLUMNS = 16  # x y z, a normal, a colour with alpha, and a few scanner fields
 
 _OBJ_MATERIAL_LINE = re.compile(rb"^[ \t]*(mtllib|usemtl)\b[^\n]*$", re.MULTILINE)
 
@@ -194,7 +195,10 @@ def _load_text_points(data: bytes) -> PointCloud:
     if not rows:
         raise UnreadableFile("the point file holds no rows")
     comma = b"," in rows[0]
-    names = not _is_number(rows[0].split(b"," if comma else None)[0])
+    first = rows[0].split(b"," if comma else None)
+    if len(first) > MAX_POINT_COLUMNS:  # every row must be as wide: refused before millions of tokens are read
+        raise UnreadableFile(f"a point row holds {len(first)} columns; x y z and at most {MAX_POINT_COLUMNS - 3} more")
+    names = not _is_number(first[0])
     try:
         points = np.loadtxt(
             io.BytesIO(b"\n".join(rows[1:] if names else rows)),

@@ -111,6 +111,7 @@ def test_text_formats_are_budgeted_on_their_bytes_before_a_parser_runs(data, fil
         (b"0,123 0,456 0,789\n0,1 0,2 0,3\n0,5 0,1 0,7\n", "decimal commas"),  # read as two points a row
         (b"0 0 0\n1 0 0 1\n0 1 0 1\n1 1 1 1\n", "columns changed"),  # regrouped by the first row
         (b"0 0\n1 0\n", "x, y and z"),
+        ((b"0 " * 200 + b"\n") * 100, "200 columns"),  # 100 k such rows took 3 s to read before refusal
     ],
 )
 def test_point_rows_that_do_not_fit_are_refused_not_regrouped(rows, match):
