@@ -10,10 +10,13 @@ import * as THREE from "three";
 import { OrbitControls } from "/static/vendor/three/OrbitControls.js";
 import { PLYLoader } from "/static/vendor/three/PLYLoader.js";
 
-const parts = []; // {name, eigenvalues, warnings, overlap, boundary (registered scans after the first), region}
+const parts = []; // {name, eigenvalues, warnings, overlap, boundary (registered scans after the first), footprint, region}
 let unionFootprint = null; // registered scans: the footprint token of the union so far
 const $ = (id) => document.getElementById(id);
 const SVG = "http://www.w3.org/2000/svg";
+const RETRIEVED = 25; // shapes asked of /v1/retrieve, grouped by person
+const SHOWN = 5; // people listed
+const OPEN_LAMBDA = 0.05; // 1/m²: a first Dirichlet eigenvalue above it is an open surface's (a closed body's is 0)
 
 function setStatus(text, problem = false) {
   $("status").textContent = text;
@@ -84,7 +87,8 @@ async function addScan(file) {
     const report = await answer(await fetch(`${route}?${query}`, { method: "POST", body: form }));
     const { overlap, boundary, union } = registered ? await measured(report.footprint) : {};
     const region = placed ? report.region.token : undefined;
-    parts.push({ name: file.name, eigenvalues: report.eigenvalues, warnings: report.warnings, overlap, boundary, region });
+    const footprint = report.footprint;
+    parts.push({ name: file.name, eigenvalues: report.eigenvalues, warnings: report.warnings, overlap, boundary, footprint, region });
     if (registered) unionFootprint = union;
     $("registered").disabled = true; // one kind of session: every scan registered, or none
     await refresh();
@@ -93,8 +97,50 @@ async function addScan(file) {
   }
 }
 
+// A registered session without one of its scans: the overlaps of the scans left, measured again
+// along their order, and the token of their union.
+async function remeasured() {
+  if (!$("registered").checked || parts.length === 0) {
+    unionFootprint = null;
+    return;
+  }
+  const form = new FormData();
+  form.append("footprints", JSON.stringify(parts.map((part) => part.footprint)));
+  const found = await answer(await fetch("/v1/overlap", { method: "POST", body: form }));
+  parts.forEach((part, index) => {
+    part.overlap = index ? found.overlaps[index - 1] : undefined;
+    part.boundary = index ? found.boundaries[index - 1] : undefined;
+  });
+  unionFootprint = found.union_footprint;
+}
+
+async function removeScan(index) {
+  const [removed] = parts.splice(index, 1);
+  try {
+    await remeasured();
+    await refresh();
+  } catch (error) {
+    setStatus(`removing ${removed.name}: ${error.message}`, true);
+  }
+}
+
+// The page as it was before any scan.
+function cleared() {
+  for (const id of ["parts", "warnings", "coverage", "matches", "plot"]) $(id).replaceChildren();
+  for (const id of ["located", "missing", "matches-note", "rebuilt-note"]) $(id).textContent = "";
+  covered.clear();
+  rebuiltView.clear();
+  $("registered").disabled = false;
+  document.body.dataset.parts = "0";
+  setStatus("No scan yet.");
+}
+
 async function refresh() {
-  const item = (part) => {
+  if (parts.length === 0) {
+    cleared();
+    return;
+  }
+  const item = (part, index) => {
     const li = document.createElement("li");
     li.textContent = `${part.name}: λ₁ = ${part.eigenvalues[0].toFixed(3)}`;
     if (part.overlap !== undefined) {
@@ -109,6 +155,13 @@ async function refresh() {
       note.textContent = ` — ${warning}`;
       li.append(note);
     }
+    const remove = document.createElement("button");
+    remove.type = "button";
+    remove.className = "remove";
+    remove.textContent = "remove";
+    remove.title = `Leave ${part.name} out of the union`;
+    remove.addEventListener("click", () => removeScan(index));
+    li.append(" ", remove);
     return li;
   };
   $("parts").replaceChildren(...parts.map(item));
@@ -116,12 +169,13 @@ async function refresh() {
   const [region, ply, found, rebuilt] = await Promise.all([
     fetch(`/v1/localize${await told()}`, { method: "POST", body: spectraForm() }).then(answer),
     fetch(`/v1/localize${await told("format=ply")}`, { method: "POST", body: spectraForm() }).then((r) => r.arrayBuffer()),
-    fetch(`/v1/retrieve${await told("top=5")}`, { method: "POST", body: spectraForm() }).then(answer),
+    fetch(`/v1/retrieve${await told(`top=${RETRIEVED}`)}`, { method: "POST", body: spectraForm() }).then(answer),
     fetch(`/v1/reconstruct${await told("format=ply")}`, { method: "POST", body: spectraForm() }),
   ]);
   plot(region);
   covered.show(ply);
   showCoverage(region);
+  showWarnings(region.warnings);
   $("located").textContent = region.located_by === "correspondence"
     ? "Coverage from where each scan's vertices lie on the template (correspondence)."
     : "Coverage read from the union's spectrum: the region may be the mirror image of the scanned one.";
@@ -129,7 +183,22 @@ async function refresh() {
   showMatches(found);
   await showRebuilt(rebuilt);
   document.body.dataset.parts = String(parts.length); // what the browser test waits for
-  setStatus(`${parts.length} part${parts.length > 1 ? "s" : ""}; union covers ${(100 * region.area_fraction).toFixed(1)} % of the body.`);
+  setStatus(`${parts.length} part${parts.length > 1 ? "s" : ""}; union covers ${(100 * region.area_fraction).toFixed(1)} % of the body${openNote(region)}.`);
+}
+
+// Covering the template is not being closed: scans of the whole body still leave holes (the
+// soles, the top of the head) unless they are capped, and the union's spectrum is then an open
+// surface's (λ₁ > 0), which the identity search and the rebuilt body read that way.
+function openNote(region) {
+  if (region.area_fraction < 0.95 || region.eigenvalues[0] < OPEN_LAMBDA) return "";
+  return `, yet its spectrum is an open surface's (λ₁ = ${region.eigenvalues[0].toFixed(2)}): the holes the scans leave, such as the soles, stay open unless "whole-body scans" caps them`;
+}
+
+// Every warning the union routes return (a unit slip, operands far apart in size), in one list.
+function showWarnings(warnings) {
+  $("warnings").replaceChildren(
+    ...warnings.map((warning) => Object.assign(document.createElement("li"), { className: "warning", textContent: warning })),
+  );
 }
 
 function plot(union) {
@@ -146,15 +215,33 @@ function plot(union) {
     return element;
   };
   const reversed = union.lower.map((value, i) => `${x(i).toFixed(1)},${y(value).toFixed(1)}`).reverse().join(" ");
+  const label = (attributes, text) => Object.assign(shape("text", attributes), { textContent: text });
+  const yTicks = [0, top / 2, top].map((value) => [
+    shape("line", { class: "tick", x1: left - 4, y1: y(value), x2: left, y2: y(value) }),
+    label({ class: "tick-label", x: left - 6, y: y(value) + 4, "text-anchor": "end" }, value.toPrecision(3)),
+  ]);
+  const xTicks = [0, Math.floor((k - 1) / 2), k - 1].map((i) => [
+    shape("line", { class: "tick", x1: x(i), y1: height - bottom, x2: x(i), y2: height - bottom + 4 }),
+    label({ class: "tick-label", x: x(i), y: height - bottom + 15, "text-anchor": "middle" }, `λ${i + 1}`),
+  ]);
+  const legend = [
+    ["part", "each part"],
+    ["union", "their union"],
+  ].map(([kind, text], row) => [
+    shape("line", { class: kind, x1: left + 12, y1: 18 + 14 * row, x2: left + 34, y2: 18 + 14 * row }),
+    label({ x: left + 40, y: 22 + 14 * row }, text),
+  ]);
   svg.replaceChildren(
     shape("line", { class: "axis", x1: left, y1: height - bottom, x2: width - 10, y2: height - bottom }),
     shape("line", { class: "axis", x1: left, y1: 10, x2: left, y2: height - bottom }),
-    Object.assign(shape("text", { x: 4, y: 16 }), { textContent: top.toFixed(0) }),
-    Object.assign(shape("text", { x: 4, y: height - bottom }), { textContent: "0" }),
-    Object.assign(shape("text", { x: width - 60, y: height - 6 }), { textContent: `i = 1…${k}` }),
+    ...yTicks.flat(),
+    ...xTicks.flat(),
     shape("polygon", { class: "band", points: `${line(union.upper)} ${reversed}` }),
     ...parts.map((part) => shape("polyline", { class: "part", points: line(part.eigenvalues) })),
     shape("polyline", { class: "union", points: line(union.eigenvalues) }),
+    ...legend.flat(),
+    shape("rect", { class: "band", x: left + 12, y: 43, width: 22, height: 8 }),
+    label({ x: left + 40, y: 50 }, "90 % band of the union"),
   );
 }
 
@@ -188,6 +275,14 @@ function viewer(canvas, material) {
       }
       mesh = new THREE.Mesh(geometry, material);
       scene.add(mesh);
+      renderer.render(scene, camera);
+    },
+    clear() {
+      if (mesh) {
+        scene.remove(mesh);
+        mesh.geometry.dispose();
+        mesh = null;
+      }
       renderer.render(scene, camera);
     },
   };
@@ -245,13 +340,27 @@ function showMatches(found) {
   note.textContent = [...found.warnings, profiled].filter(Boolean).join(" ");
   note.classList.toggle("warning", found.warnings.some((warning) => warning.includes("not an identification")));
   $("matches").replaceChildren(
-    ...found.matches.map((match) => {
+    ...byIdentity(found.matches).map(({ match, stored }) => {
       const li = document.createElement("li");
       const share = match.share === null ? "" : `, overlap ${match.share.toFixed(1)}`;
-      li.textContent = `${match.label} (distance ${match.distance.toFixed(3)}${share})`;
+      const poses = stored > 1 ? `, ${stored} of its stored shapes` : "";
+      li.textContent = `${match.label} (distance ${match.distance.toFixed(3)}${share}${poses})`;
       return li;
     }),
   );
+}
+
+// The ranked shapes as people: the database stores a person in several poses, each a shape of
+// its own; each label is listed once, where its nearest shape ranks, with how many of its shapes
+// were among those ranked. At most SHOWN people.
+function byIdentity(matches) {
+  const people = new Map();
+  for (const match of matches) {
+    const seen = people.get(match.label);
+    if (seen) seen.stored += 1;
+    else people.set(match.label, { match, stored: 1 });
+  }
+  return [...people.values()].slice(0, SHOWN);
 }
 
 $("file").addEventListener("change", async (event) => {
