@@ -66,3 +66,20 @@ def test_it_learns_and_its_graph_matches_pytorch_on_other_parts(tmp_path):
     parts = [dict(np.load(path)) for path in sorted((parts_dir / "parts").glob("*.npz"))]
     export_correspondence(model, parts[0], tmp_path / "correspondence.onnx")
     assert correspondence_parity(model, tmp_path / "correspondence.onnx", parts[1:]) < 1e-4
+
+
+def test_a_run_continued_after_its_first_cycle_ends_where_one_run_would(tmp_path):
+    """Warm restarts: a checkpoint of the first cycle continued with the preset's next cycle has
+    the weights and losses of the same preset trained from scratch (same parts drawn, a fresh
+    Adam per cycle)."""
+    parts_dir = _parts_dir(tmp_path)
+    first = TrainingPreset(name="cycles", steps=6, learning_rate=5e-3, config=CONFIG)
+    both = TrainingPreset(name="cycles", steps=6, learning_rate=5e-3, restarts=((4, 1e-3),), config=CONFIG)
+    quiet = {"log": lambda _: None}
+    train(parts_dir, tmp_path / "continued.pt", first, **quiet)
+    continued = train(parts_dir, tmp_path / "continued.pt", both, **quiet)
+    scratch = train(parts_dir, tmp_path / "scratch.pt", both, **quiet)
+    assert continued["step"] == scratch["step"] == 10
+    np.testing.assert_array_equal(continued["losses"], scratch["losses"])
+    for name, weights in scratch["model"].items():
+        torch.testing.assert_close(continued["model"][name], weights, rtol=0, atol=0)
