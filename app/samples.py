@@ -1,9 +1,11 @@
 """The sample files the README's examples use, made from the template body the service ships.
 
 ``spectral-unions samples DIR`` writes them: two partial scans (the template without some of
-its body parts, so each has a boundary), a complete body to store, and the two parts' spectra
-as the ``spectra`` field takes them. Everything is computed here, from ``models/``, so the
-examples run from a fresh clone without a download.
+its body parts, so each has a boundary), a complete body to store, the two parts' spectra as
+the ``spectra`` field takes them, and the two scans the README's picture of the session page
+was made from (one sees the head, torso and left arm, the other the torso, hips and right
+leg). Everything is computed here, from ``models/``, so the examples run from a fresh clone
+without a download.
 """
 
 import json
@@ -19,6 +21,11 @@ from app.inference.template import PART_NAMES, Template
 PARTS = {
     "no_head_neck.ply": ("head", "neck"),
     "no_left_forearm_hand.ply": ("left_forearm", "left_hand"),
+}
+# The session page's two scans, overlapping in the torso: file name → the body parts each keeps.
+SESSION_SCANS = {
+    "head_torso_left_arm.ply": ("head", "neck", "torso", "left_upper_arm", "left_forearm", "left_hand"),
+    "torso_hips_right_leg.ply": ("torso", "hips", "right_thigh", "right_shin", "right_foot"),
 }
 BODY_FILE, BODY_SCALE = "body.ply", 1.04  # a complete body of another size: an identity to store
 SPECTRA_FILE = "spectra.json"
@@ -47,7 +54,8 @@ def sample_overlap(template: Template) -> float:
 
 
 def write_samples(folder: Path, template: Template) -> list[Path]:
-    """Write the parts, the body and the parts' spectra into ``folder``; the paths written."""
+    """Write the parts, the body, the parts' spectra and the session scans into ``folder``; the
+    paths written."""
     folder.mkdir(parents=True, exist_ok=True)
     written, spectra = [], []
     for name, removed in PARTS.items():
@@ -57,6 +65,8 @@ def write_samples(folder: Path, template: Template) -> list[Path]:
     body = trimesh.Trimesh(template.vertices * BODY_SCALE, template.faces, process=False)
     written.append(_write(folder / BODY_FILE, body.export(file_type="ply")))
     written.append(_write(folder / SPECTRA_FILE, json.dumps(spectra).encode()))
+    for name, kept in SESSION_SCANS.items():
+        written.append(_write(folder / name, template_part(template, tuple(p for p in PART_NAMES if p not in kept))))
     return written
 
 

@@ -1,22 +1,27 @@
-"""Run the README's API examples against a live service and write what it answered.
+"""Run the README's API examples, as a shell runs them, against a live service, and write what
+it answered.
 
     SPECTRAL_UNIONS_API_KEY=change-me make run            # in one shell
     .venv/bin/python benchmarks/readme_examples.py         # in another
 
-Writes the samples (``spectral-unions samples``) to a temporary folder, sends the README's
-requests with httpx, and replaces the block between ``<!-- examples:begin -->`` and
-``<!-- examples:end -->`` in ``README.md`` with the commands and their answers (long lists cut
-to three values), and ``app/api/examples.json`` (the OpenAPI page's success examples) with the
-answers rounded to three decimals. Run it after the models change, so that no example shows
-what an earlier model said.
+Writes the samples (``spectral-unions samples``) to a temporary folder and runs each command of
+:func:`examples` there with bash (curl and jq, as a reader would), then replaces the block
+between ``<!-- examples:begin -->`` and ``<!-- examples:end -->`` in ``README.md`` with the
+commands and their answers (long lists cut to three values), the Python client example's
+printed output with what it prints now, and ``app/api/examples.json`` (the OpenAPI page's
+success examples) with the answers rounded to three decimals. What the README
+shows is what its commands print, so they run verbatim (``tests/test_readme_examples.py``).
+Run it after the models change, so that no example shows what an earlier model said.
 """
 
 import argparse
 import json
+import subprocess
+import sys
 import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
-
-import httpx
 
 from app.core.config import Settings
 from app.geometry.overlap import TOKEN_PREFIX
@@ -27,9 +32,11 @@ from app.samples import sample_overlap, write_samples
 ROOT = Path(__file__).resolve().parents[1]
 README, EXAMPLES = ROOT / "README.md", ROOT / "app" / "api" / "examples.json"
 BEGIN, END = "<!-- examples:begin -->", "<!-- examples:end -->"
-PARTS = ("no_head_neck.ply", "no_left_forearm_hand.ply")
+CLIENT_BEGIN, CLIENT_END = "<!-- client:begin -->", "<!-- client:end -->"
+URL = "http://127.0.0.1:8000"  # as the README writes it; a test runs the commands against its own
 KEY = "change-me"
-TOKEN_SHOWN = 24  # characters of a footprint token shown and recorded
+TOKEN_SHOWN = 24  # characters of a footprint or region token shown and recorded
+UNION_THEN = "(the union's fields as above, then:)\n"
 
 
 def rounded(value):
@@ -61,144 +68,146 @@ def shown(value, cut: int = 3) -> str:
     return json.dumps(rounded(value), ensure_ascii=False)
 
 
-def files(folder: Path) -> list[tuple[str, tuple[str, bytes, str]]]:
-    return [("files", (name, (folder / name).read_bytes(), "application/octet-stream")) for name in PARTS]
+def as_json(output: str) -> str:
+    return shown(json.loads(output))
+
+
+def as_text(output: str) -> str:
+    return output.rstrip("\n")
+
+
+def fields(*keys: str, preface: str = "") -> Callable[[str], str]:
+    """Show only ``keys`` of a JSON answer, after ``preface``."""
+    return lambda output: preface + shown({k: json.loads(output)[k] for k in keys})
+
+
+def first_of_list(output: str) -> str:
+    page = json.loads(output)
+    return shown({**page, "shapes": page["shapes"][:1]})[:-2] + ", …]}"
+
+
+PER_VERTEX_SHOWN = {"vertex_indices": 3, "template_vertex": 3, "position": 3, "confidence": 3, "vertex_confidence": 5}
+
+
+def cut_tokens(body: dict) -> dict:
+    """A recorded answer with its tokens cut and its per-vertex lists shortened (vertex indices
+    to five, coordinates to three)."""
+    cut = dict(body)
+    for key in ("union_footprint", "region_token"):
+        if cut.get(key):
+            cut[key] = cut[key][:TOKEN_SHOWN] + "…"
+    for key, length in PER_VERTEX_SHOWN.items():
+        if isinstance(cut.get(key), list):
+            cut[key] = cut[key][:length]
+    if isinstance(cut.get("vertices"), list) and cut["vertices"]:
+        cut["vertices"] = cut["vertices"][: 5 if isinstance(cut["vertices"][0], int) else 3]
+    if isinstance(cut.get("region"), dict):
+        region = cut["region"]
+        cut["region"] = {**region, "vertices": region["vertices"][:5], "token": region["token"][:TOKEN_SHOWN] + "…"}
+    return cut
+
+
+@dataclass(frozen=True)
+class Example:
+    command: str  # as the README shows it and bash runs it, in the samples folder
+    show: Callable[[str], str] = as_json  # what the README shows of its output
+    record: str | None = None  # its name among the OpenAPI page's examples, if it is one
+
+
+def examples(overlap: float) -> list[Example]:
+    """The README's examples, in order; later ones read what earlier ones wrote."""
+    both = "-F files=@no_head_neck.ply -F files=@no_left_forearm_hand.ply"
+    key = f"-H 'X-API-Key: {KEY}'"
+    union_fields = ("vertices", "area_fraction", "part_coverage", "template_vertices", "located_by")
+    body_fields = ("height_m", "area_m2", "body_eigenvalues", "spectrum_relative_error", "vertices")
+    footprint = f"'{URL}/v1/spectrum?footprint=true'"
+    header = "sed '/end_header/q'"  # a PLY's text header, up to its end
+    status = "-o /dev/null -w '%{http_code}\\n'"
+    return [
+        Example(f"curl -s -F file=@no_head_neck.ply '{URL}/v1/spectrum?units=m'", record="spectrum"),
+        Example(f"curl -s {both} {URL}/v1/union", record="union"),
+        Example(f'curl -s -F "spectra=$(cat spectra.json)" {URL}/v1/union'),
+        Example(f"curl -s -F \"spectra=$(cat spectra.json)\" '{URL}/v1/union?overlap={overlap}'"),
+        Example(f"curl -s {both} '{URL}/v1/union?measure_overlap=true'"),
+        Example(
+            f"curl -s -F file=@no_head_neck.ply {footprint} | tee view0.json",
+            fields("eigenvalues", "area_m2", "footprint"),
+        ),
+        Example(f"curl -s -F file=@no_left_forearm_hand.ply {footprint} > view1.json", as_text),
+        Example("jq -c -s 'map(.footprint)' view0.json view1.json > footprints.json", as_text),
+        Example(f"curl -s -F 'footprints=<footprints.json' {URL}/v1/overlap", record="overlap"),
+        Example(f"curl -s -F file=@no_head_neck.ply {URL}/v1/correspondence", record="correspondence"),
+        Example(f"curl -s {both} {URL}/v1/localize", fields(*union_fields, preface=UNION_THEN), "localize"),
+        Example(f"curl -s {both} '{URL}/v1/localize?format=ply' -o covered.ply && {header} covered.ply", as_text),
+        Example(f"curl -s {both} {URL}/v1/reconstruct", fields(*body_fields, preface=UNION_THEN), "reconstruct"),
+        Example(f"curl -s {both} '{URL}/v1/reconstruct?format=ply' -o rebuilt.ply && {header} rebuilt.ply", as_text),
+        Example(f"curl -s {both} '{URL}/v1/retrieve?top=3'", record="retrieve"),
+        Example(f"curl -s {key} -F label=alice -F file=@body.ply {URL}/v1/shapes | tee alice.json", record="add_shape"),
+        Example(f"curl -s '{URL}/v1/shapes?offset=0&limit=2'", first_of_list, "list_shapes"),
+        Example(f"curl -s {status} -X DELETE {key} {URL}/v1/shapes/$(jq -r .id alice.json)", as_text),
+        Example(f"curl -s {URL}/v1/models", record="models"),
+        Example(f"curl -s {URL}/healthz"),
+        Example(f"curl -s {URL}/readyz"),
+        Example(f"curl -s {URL}/metrics | grep -E '^spectral_unions_requests_total' | head -3", as_text),
+        Example(f"curl -s -F 'spectra=[[1,2,3]]' {URL}/v1/union"),
+        Example(f"curl -s -X DELETE -H 'X-API-Key: wrong' {URL}/v1/shapes/x"),
+    ]
+
+
+def run(example: Example, folder: Path, url: str = URL) -> str:
+    """What ``example``'s command prints, run by bash in ``folder`` against ``url``; CalledProcessError
+    when it fails (curl -s fails on no answer, jq on no JSON)."""
+    command = example.command.replace(URL, url)
+    return subprocess.run(
+        ["bash", "-o", "pipefail", "-c", command], cwd=folder, capture_output=True, text=True, check=True, timeout=300
+    ).stdout
+
+
+def readme_commands(text: str) -> list[str]:
+    """The commands of the README's examples block, as written there."""
+    block = text[text.index(BEGIN) : text.index(END)]
+    return [line[2:] for line in block.splitlines() if line.startswith("$ ")]
+
+
+def client_code(text: str) -> str:
+    """The Python client example of the README, as written there."""
+    block = text[text.index(CLIENT_BEGIN) : text.index(CLIENT_END)]
+    return block.split("```python\n", 1)[1].split("```", 1)[0]
+
+
+def run_client(code: str, folder: Path, url: str = URL) -> str:
+    """What the client example prints, run by this Python in ``folder`` against ``url``."""
+    command = [sys.executable, "-c", code.replace(URL, url)]
+    return subprocess.run(command, cwd=folder, capture_output=True, text=True, check=True, timeout=300).stdout
+
+
+def with_client_output(text: str, output: str) -> str:
+    """The README with the client example's printed output replaced by ``output``."""
+    code = client_code(text)
+    block = f"{CLIENT_BEGIN}\n```python\n{code}```\n\n```console\n{output.rstrip()}\n```\n{CLIENT_END}"
+    return text[: text.index(CLIENT_BEGIN)] + block + text[text.index(CLIENT_END) + len(CLIENT_END) :]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--url", default="http://127.0.0.1:8000")
+    parser.add_argument("--url", default=URL)
     args = parser.parse_args()
-    url = args.url
-    both = "-F files=@no_head_neck.ply -F files=@no_left_forearm_hand.ply"
+    template = Template.load(Settings().models_dir)
     blocks, recorded = [], {}
-    with tempfile.TemporaryDirectory() as scratch, httpx.Client(base_url=url, timeout=120) as client:
+    with tempfile.TemporaryDirectory() as scratch:
         folder = Path(scratch)
-        write_samples(folder, Template.load(Settings().models_dir))
-
-        def show(command: str, response: httpx.Response, name: str | None = None) -> dict:
-            """A JSON answer, shown cut and, under ``name``, recorded for the OpenAPI page."""
-            body = response.json()
-            if name:
-                recorded[name] = rounded(body)
-            blocks.append(f"$ {command}\n{shown(body)}")
-            return body
-
-        def show_text(command: str, text: str) -> None:
-            """An answer shown as it is (a header, a status code, metrics lines)."""
-            blocks.append(f"$ {command}\n{text}")
-
-        part = (folder / PARTS[0]).read_bytes()
-        show(
-            f"curl -s -F file=@{PARTS[0]} '{url}/v1/spectrum?units=m'",
-            client.post("/v1/spectrum", params={"units": "m"}, files={"file": (PARTS[0], part)}),
-            "spectrum",
-        )
-        show(f"curl -s {both} {url}/v1/union", client.post("/v1/union", files=files(folder)), "union")
-        spectra = (folder / "spectra.json").read_text()
-        show(
-            f'curl -s -F "spectra=$(cat spectra.json)" {url}/v1/union',
-            client.post("/v1/union", data={"spectra": spectra}),
-        )
-        share = round(sample_overlap(Template.load(Settings().models_dir)), 2)
-        show(
-            f"curl -s -F \"spectra=$(cat spectra.json)\" '{url}/v1/union?overlap={share}'",
-            client.post("/v1/union", params={"overlap": share}, data={"spectra": spectra}),
-        )
-        show(
-            f"curl -s {both} '{url}/v1/union?measure_overlap=true'",
-            client.post("/v1/union", params={"measure_overlap": "true"}, files=files(folder)),
-        )
-        views = [
-            client.post("/v1/spectrum", params={"footprint": "true"}, files={"file": (n, (folder / n).read_bytes())})
-            for n in PARTS
-        ]
-        view = views[0].json()
-        show_text(
-            f"curl -s -F file=@{PARTS[0]} '{url}/v1/spectrum?footprint=true' > view0.json  # view1.json: {PARTS[1]}",
-            shown({k: view[k] for k in ("eigenvalues", "area_m2", "footprint")}),
-        )
-        tokens = json.dumps([v.json()["footprint"] for v in views])
-        measured = show(
-            f"curl -s -F \"footprints=$(jq -sc 'map(.footprint)' view0.json view1.json)\" {url}/v1/overlap",
-            client.post("/v1/overlap", data={"footprints": tokens}),
-        )
-        recorded["overlap"] = rounded({**measured, "union_footprint": measured["union_footprint"][:TOKEN_SHOWN] + "…"})
-        placed = client.post("/v1/correspondence", files={"file": (PARTS[0], part)}).json()
-        cut = {
-            **placed,
-            "vertex_indices": placed["vertex_indices"][:3],
-            "template_vertex": placed["template_vertex"][:3],
-            "position": placed["position"][:3],
-            "confidence": placed["confidence"][:3],
-            "region": {**placed["region"], "vertices": placed["region"]["vertices"][:5]},
-        }
-        cut["region"]["token"] = cut["region"]["token"][:TOKEN_SHOWN] + "…"
-        recorded["correspondence"] = rounded(cut)
-        show_text(f"curl -s -F file=@{PARTS[0]} {url}/v1/correspondence", shown(cut))
-        localized = client.post("/v1/localize", files=files(folder)).json()
-        token = localized["region_token"] and localized["region_token"][:TOKEN_SHOWN] + "…"
-        confidence = localized["vertex_confidence"] and localized["vertex_confidence"][:5]
-        localized = {**localized, "vertices": localized["vertices"][:5], "vertex_confidence": confidence}
-        recorded["localize"] = rounded({**localized, "region_token": token})
-        keys = ("vertices", "area_fraction", "part_coverage", "template_vertices", "located_by")
-        region = {k: localized[k] for k in keys}
-        show_text(f"curl -s {both} {url}/v1/localize", "(the union's fields as above, then:)\n" + shown(region))
-        ply = client.post("/v1/localize", params={"format": "ply"}, files=files(folder)).content
-        header = ply[: ply.index(b"end_header")].decode().strip()
-        show_text(f"curl -s {both} '{url}/v1/localize?format=ply' -o covered.ply", header)
-        rebuilt = client.post("/v1/reconstruct", files=files(folder)).json()
-        recorded["reconstruct"] = rounded({**rebuilt, "vertices": rebuilt["vertices"][:3]})
-        body = {
-            k: rebuilt[k] for k in ("height_m", "area_m2", "body_eigenvalues", "spectrum_relative_error", "vertices")
-        }
-        show_text(f"curl -s {both} {url}/v1/reconstruct", "(the union's fields as above, then:)\n" + shown(body))
-        mesh = client.post("/v1/reconstruct", params={"format": "ply"}, files=files(folder)).content
-        header = mesh[: mesh.index(b"end_header")].decode().strip()
-        show_text(f"curl -s {both} '{url}/v1/reconstruct?format=ply' -o body.ply", header)
-        show(
-            f"curl -s {both} '{url}/v1/retrieve?top=3'",
-            client.post("/v1/retrieve", params={"top": 3}, files=files(folder)),
-            "retrieve",
-        )
-        added = show(
-            f"curl -s -H 'X-API-Key: {KEY}' -F label=alice -F file=@body.ply {url}/v1/shapes",
-            client.post(
-                "/v1/shapes",
-                headers={"X-API-Key": KEY},
-                data={"label": "alice"},
-                files={"file": ("body.ply", (folder / "body.ply").read_bytes())},
-            ),
-            "add_shape",
-        )
-        page = client.get("/v1/shapes", params={"offset": 0, "limit": 2}).json()
-        recorded["list_shapes"] = rounded(page)
-        shown_page = shown({**page, "shapes": page["shapes"][:1]})[:-2] + ", …]}"
-        show_text(f"curl -s '{url}/v1/shapes?offset=0&limit=2'", shown_page)
-        deleted = client.delete(f"/v1/shapes/{added['id']}", headers={"X-API-Key": KEY}).status_code
-        status_only = "-s -o /dev/null -w '%{http_code}\\n'"
-        show_text(f"curl {status_only} -X DELETE -H 'X-API-Key: {KEY}' {url}/v1/shapes/{added['id']}", str(deleted))
-        show(f"curl -s {url}/v1/models", client.get("/v1/models"), "models")
-        show(f"curl -s {url}/healthz", client.get("/healthz"))
-        show(f"curl -s {url}/readyz", client.get("/readyz"))
-        metrics = [
-            line
-            for line in client.get("/metrics").text.splitlines()
-            if line.startswith("spectral_unions_requests_total")
-        ]
-        show_text(
-            f"curl -s {url}/metrics | grep -E '^spectral_unions_requests_total' | head -3", "\n".join(metrics[:3])
-        )
-        show(f"curl -s -F 'spectra=[[1,2,3]]' {url}/v1/union", client.post("/v1/union", data={"spectra": "[[1,2,3]]"}))
-        show(
-            f"curl -s -X DELETE -H 'X-API-Key: wrong' {url}/v1/shapes/x",
-            client.delete("/v1/shapes/x", headers={"X-API-Key": "wrong"}),
-        )
-    text = README.read_text()
+        write_samples(folder, template)
+        for example in examples(round(sample_overlap(template), 2)):
+            output = run(example, folder, args.url)
+            blocks.append(f"$ {example.command}\n{example.show(output)}".rstrip("\n"))
+            if example.record:
+                recorded[example.record] = rounded(cut_tokens(json.loads(output)))
+        text = README.read_text()
+        text = with_client_output(text, run_client(client_code(text), folder, args.url))
     block = BEGIN + "\n```console\n" + "\n\n".join(blocks) + "\n```\n" + END
     README.write_text(text[: text.index(BEGIN)] + block + text[text.index(END) + len(END) :])
     EXAMPLES.write_text(json.dumps(recorded, indent=1, ensure_ascii=False) + "\n")
-    print(f"README.md examples and {EXAMPLES.relative_to(ROOT)} written from {url}")
+    print(f"README.md examples and {EXAMPLES.relative_to(ROOT)} written from {args.url}")
 
 
 if __name__ == "__main__":

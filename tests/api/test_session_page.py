@@ -27,34 +27,28 @@ from selenium.webdriver.support.ui import Select, WebDriverWait
 
 from app.core.config import Settings
 from app.geometry.topology import drop_unreferenced
-from app.inference.template import PART_NAMES, Template
-from app.samples import template_part
+from app.inference.template import Template
+from app.samples import SESSION_SCANS, write_samples
 from tests.api.servers import start, wait_ready
 from tests.postgres import free_port
 from training.reconstruction.blind_spots import above_soles
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 DRIVER = shutil.which("chromedriver")
-pytestmark = pytest.mark.skipif(not (CHROMIUM and DRIVER), reason="needs chromium and chromedriver")
+pytestmark = pytest.mark.skipif(
+    not (CHROMIUM and DRIVER),
+    reason="needs chromium and chromedriver (.ci/run installs them: apt-get install chromium chromium-driver)",
+)
 
-# Two overlapping scans (the torso in both) that never see the right arm or the left leg.
-PARTS = {
-    "head_torso_left_arm.ply": ("head", "neck", "torso", "left_upper_arm", "left_forearm", "left_hand"),
-    "torso_hips_right_leg.ply": ("torso", "hips", "right_thigh", "right_shin", "right_foot"),
-}
 BACKGROUND = (244, 244, 244)  # the canvas's clear colour (#f4f4f4)
 
 
 @pytest.fixture(scope="module")
 def scans(tmp_path_factory) -> list[Path]:
+    """The samples' two session scans (the torso in both; neither sees the right arm or the left leg)."""
     folder = tmp_path_factory.mktemp("scans")
-    template = Template.load(Settings().models_dir)
-    paths = []
-    for name, kept in PARTS.items():
-        path = folder / name
-        path.write_bytes(template_part(template, tuple(part for part in PART_NAMES if part not in kept)))
-        paths.append(path)
-    return paths
+    write_samples(folder, Template.load(Settings().models_dir))
+    return [folder / name for name in SESSION_SCANS]
 
 
 @pytest.fixture(scope="module")
