@@ -25,6 +25,7 @@ from typing import Literal, Self
 import httpx
 
 from app.api.problems import PROBLEM_MEDIA_TYPE, Problem
+from app.api.responses import UnionResponse
 from app.api.routes.correspondence import CorrespondenceResponse
 from app.api.routes.localize import LocalizeResponse
 from app.api.routes.models import ModelsResponse
@@ -33,7 +34,6 @@ from app.api.routes.reconstruct import ReconstructResponse
 from app.api.routes.retrieve import RetrieveResponse
 from app.api.routes.shapes import ShapeOut, ShapePage
 from app.api.routes.spectrum import FootprintedReport
-from app.api.routes.unions import UnionResponse
 from app.geometry.pipeline import SpectrumReport
 from app.geometry.spectrum import DEFAULT_K
 

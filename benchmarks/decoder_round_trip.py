@@ -30,8 +30,8 @@ from app.inference.models import SpectralModels
 from training.benchmark_arguments import benchmark_parser
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
-from training.learning.export import decoder_basis
 from training.reconstruction.evaluate import body_scores, closed_spectra, closed_spectrum, query_sets
+from training.reconstruction.export import decoder_basis
 from training.reconstruction.spectral_fit import CotangentSpectrum, fitted
 from training.reconstruction.train import data_set_rest_bodies
 

@@ -10,6 +10,7 @@ from typer.testing import CliRunner
 from app.cli import cli
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum, spectrum_from_bytes
 from app.main import create_app
+from app.samples import BODY_FILE, PARTS, SESSION_SCANS, SPECTRA_FILE
 from tests.api.conftest import settings_for
 from tests.builders import ascii_ply
 from tests.conftest import sphere
@@ -46,18 +47,17 @@ def test_samples_command_writes_what_the_readme_uses(tmp_path):
     result = CliRunner().invoke(cli, ["samples", str(tmp_path / "samples")])
     assert result.exit_code == 0, result.output
     folder = tmp_path / "samples"
-    names = {"no_head_neck.ply", "no_left_forearm_hand.ply", "body.ply", "spectra.json"}
+    names = {*PARTS, BODY_FILE, SPECTRA_FILE, *SESSION_SCANS}
     assert {p.name for p in folder.iterdir()} == names
     assert all(f"wrote {folder / name}" in result.stdout for name in names)
-    reports = [
-        spectrum_from_bytes((folder / n).read_bytes(), "ply", SpectrumOptions())
-        for n in sorted(names - {"spectra.json"})
-    ]
-    body, *parts = reports  # sorted: body.ply first
+    reports = [spectrum_from_bytes((folder / n).read_bytes(), "ply", SpectrumOptions()) for n in [BODY_FILE, *PARTS]]
+    body, *parts = reports
     assert body.boundary == "none" and abs(body.eigenvalues[0]) < 1e-6
     assert [p.boundary for p in parts] == ["dirichlet", "dirichlet"]
-    spectra = json.loads((folder / "spectra.json").read_text())
-    expected = [parts[0].eigenvalues, parts[1].eigenvalues]  # no_head_neck, then no_left_forearm_hand
+    scans = [spectrum_from_bytes((folder / n).read_bytes(), "ply", SpectrumOptions()) for n in SESSION_SCANS]
+    assert [scan.boundary for scan in scans] == ["dirichlet", "dirichlet"]  # partial scans, for the page
+    spectra = json.loads((folder / SPECTRA_FILE).read_text())
+    expected = [parts[0].eigenvalues, parts[1].eigenvalues]  # in PARTS order, as the spectra field takes them
     np.testing.assert_allclose(spectra, expected, rtol=1e-12)
 
 

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from fastapi import File, Form, Query, Request, UploadFile
+from fastapi import Depends, File, Form, Query, Request, UploadFile
 
 from app.api import form_json
 from app.api.admission import take_solves
@@ -53,6 +53,39 @@ OverlapQuery = Annotated[
         examples=["0.94"],
     ),
 ]
+
+
+@dataclass(frozen=True)
+class SentOperands:
+    """What a union-based request sent as operands: uploaded files, spectra (the form field's
+    text, checked when resolved) and the files' units."""
+
+    files: list[UploadFile]
+    spectra: str | None
+    units: Literal["m", "cm", "mm"] = "m"
+    scale: float | None = None
+
+
+def sent_operands(
+    files: FilesField = None, spectra: SpectraField = None, units: UnitsQuery = "m", scale: ScaleQuery = None
+) -> SentOperands:
+    """The one declaration of the operand parameters every union-based route takes."""
+    return SentOperands(files or [], spectra, units, scale)
+
+
+OperandsDep = Annotated[SentOperands, Depends(sent_operands)]
+
+
+@dataclass(frozen=True)
+class Wanted:
+    """What a route needs of each uploaded file beyond its spectrum."""
+
+    footprints: bool = False  # where it lies (app.geometry.overlap): registered views are measured
+    cap_holes: bool = False  # its holes capped: the one operand is a whole-body scan
+    descriptors: bool = False  # what the correspondence network reads of it
+
+
+SPECTRA_ONLY = Wanted()
 
 
 CapHolesQuery = Annotated[
@@ -201,23 +234,17 @@ async def _no_operand(request: Request) -> str:
 async def resolve_operands(
     request: Request,
     settings: Settings,
-    files: list[UploadFile] | None,
-    spectra: str | None,
+    sent: SentOperands,
     k: int,
-    units: Literal["m", "cm", "mm"],
-    scale: float | None,
     check_count: Callable[[int], object] | None = None,
-    footprints: bool = False,
-    cap_holes: bool = False,
-    descriptors: bool = False,
+    wanted: Wanted = SPECTRA_ONLY,
 ) -> tuple[list[Operand], float]:
     """Every operand's spectrum (at least one), and the milliseconds spent solving uploaded files.
     ``check_count`` sees how many operands there are before any upload is solved (a mismatch
-    it raises costs no solve); with ``footprints`` each uploaded file's operand says where it lies,
-    with ``descriptors`` what the correspondence network reads of it;
-    with ``cap_holes`` the one operand must be an uploaded scan, solved with its holes capped."""
+    it raises costs no solve); ``wanted`` says what else each uploaded file's operand carries
+    (with ``cap_holes`` the one operand must be an uploaded scan, solved with its holes capped)."""
+    files, spectra, cap_holes = sent.files, sent.spectra, wanted.cap_holes
     given = parse_spectra(spectra, k)
-    files = files or []
     count = len(files) + len(given)
     if count == 0:
         raise ProblemError(422, "invalid-request", "Invalid request", await _no_operand(request))
@@ -238,10 +265,10 @@ async def resolve_operands(
         )
     if check_count is not None:
         check_count(count)
-    options = upload_options(settings, k, units, scale, cap_holes=cap_holes)
+    options = upload_options(settings, k, sent.units, sent.scale, cap_holes=cap_holes)
     sources = [f"files[{index}] {upload.filename or ''}".strip() for index, upload in enumerate(files)]
     started = time.perf_counter()
-    outcomes = await _solve_all(request, files, options, footprints, descriptors)
+    outcomes = await _solve_all(request, files, options, wanted)
     solve_ms = (time.perf_counter() - started) * 1e3
     for source, outcome in zip(sources, outcomes, strict=True):
         if isinstance(outcome, InputError):
@@ -257,7 +284,7 @@ async def resolve_operands(
 
 
 async def _solve_all(
-    request: Request, files: list[UploadFile], options: SpectrumOptions, footprints: bool, descriptors: bool
+    request: Request, files: list[UploadFile], options: SpectrumOptions, wanted: Wanted
 ) -> list[Solved | BaseException]:
     """Every file solved at once on the solver pool (a union of two scans costs one solve's
     latency, not two), each outcome in upload order: a report, or the exception it raised.
@@ -271,7 +298,7 @@ async def _solve_all(
         data = await upload.read()
         file_type = resolve_file_type(upload.filename, None)
         return await solver.solve_with_functions(
-            data, file_type, options, vectors=False, footprint=footprints, descriptors=descriptors
+            data, file_type, options, vectors=False, footprint=wanted.footprints, descriptors=wanted.descriptors
         )
 
     return list(await asyncio.gather(*(solve(upload) for upload in files), return_exceptions=True))

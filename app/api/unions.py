@@ -9,11 +9,20 @@ from typing import Literal
 
 import anyio
 import numpy as np
-from fastapi import Request, UploadFile
+from fastapi import Request
 
 from app.api import form_json
 from app.api.metrics import INFERENCE
-from app.api.operands import NOT_TOLD, Operand, Told, parse_shares, parse_spectra, resolve_operands
+from app.api.operands import (
+    NOT_TOLD,
+    Operand,
+    SentOperands,
+    Told,
+    Wanted,
+    parse_shares,
+    parse_spectra,
+    resolve_operands,
+)
 from app.core.config import Settings
 from app.geometry.overlap import measured_fold
 from app.geometry.plausibility import size_warnings
@@ -71,11 +80,9 @@ async def union_of_operands(
     request: Request,
     settings: Settings,
     models: SpectralModels,
-    files: list[UploadFile] | None,
-    spectra: str | None,
-    units: Literal["m", "cm", "mm"],
-    scale: float | None,
+    sent: SentOperands,
     told: Told = NOT_TOLD,
+    *,
     cap_holes: bool = False,
     locate: bool = False,
 ) -> UnionOutcome:
@@ -86,6 +93,7 @@ async def union_of_operands(
     ``cap_holes``: one uploaded whole-body scan, its holes capped
     (:func:`app.api.operands.resolve_operands`); ``locate``: the route answers the operands'
     region, so even one upload is placed (others place uploads only to measure a step)."""
+    files, spectra = sent.files, sent.spectra
     overlaps, boundaries = parse_shares(told.overlap), parse_shares(told.boundary, "boundary")
     if told.measure:
         _check_measurable(overlaps, boundaries, spectra, models)
@@ -100,19 +108,8 @@ async def union_of_operands(
     steps = bool(files) and len(files) + (len(carried) if carried else 0) > 1
     only_placeable = not (spectra and spectra.strip()) or carried is not None
     places = models.correspondence is not None and bool(files) and only_placeable and (locate or steps)
-    operands, solve_ms = await resolve_operands(
-        request,
-        settings,
-        files,
-        spectra,
-        models.k,
-        units,
-        scale,
-        check_overlaps,
-        footprints=told.measure,
-        cap_holes=cap_holes,
-        descriptors=places,
-    )
+    wanted = Wanted(footprints=told.measure, cap_holes=cap_holes, descriptors=places)
+    operands, solve_ms = await resolve_operands(request, settings, sent, models.k, check_overlaps, wanted)
     source: OverlapSource | None = "told" if overlaps is not None else None
     if told.measure:  # k-d trees of up to UNION_POINTS points per step: off the event loop
         footprints = [o.footprint for o in operands if o.footprint is not None]

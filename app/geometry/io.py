@@ -198,10 +198,12 @@ def _load_text_points(data: bytes) -> PointCloud:
     first = rows[0].split(b"," if comma else None)
     if len(first) > MAX_POINT_COLUMNS:  # every row must be as wide: refused before millions of tokens are read
         raise UnreadableFile(f"a point row holds {len(first)} columns; x y z and at most {MAX_POINT_COLUMNS - 3} more")
-    names = not _is_number(first[0])
+    points_rows = rows[1:] if not _is_number(first[0]) else rows  # a first row of column names is skipped
+    if not points_rows:
+        raise UnreadableFile("the point file holds column names and no point rows")
     try:
         points = np.loadtxt(
-            io.BytesIO(b"\n".join(rows[1:] if names else rows)),
+            io.BytesIO(b"\n".join(points_rows)),
             delimiter="," if comma else None,
             comments="#",
             ndmin=2,

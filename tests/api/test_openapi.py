@@ -92,6 +92,7 @@ def test_documented_error_examples_are_the_messages_the_service_sends(tmp_path):
 
 
 def test_every_json_answer_has_a_success_example_that_its_model_accepts():
+    from app.api.responses import UnionResponse
     from app.api.routes.correspondence import CorrespondenceResponse
     from app.api.routes.localize import LocalizeResponse
     from app.api.routes.models import ModelsResponse
@@ -99,7 +100,6 @@ def test_every_json_answer_has_a_success_example_that_its_model_accepts():
     from app.api.routes.reconstruct import ReconstructResponse
     from app.api.routes.retrieve import RetrieveResponse
     from app.api.routes.shapes import ShapeOut, ShapePage
-    from app.api.routes.unions import UnionResponse
     from app.geometry.pipeline import SpectrumReport
 
     models = {

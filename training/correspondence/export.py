@@ -12,7 +12,7 @@ import torch
 
 from app.contract import CORRESPONDENCE_INPUTS, CORRESPONDENCE_OUTPUTS
 from training.correspondence.net import CorrespondenceNet
-from training.learning.export import _export, _relative, session
+from training.onnx_export import export_graph, relative_difference, session
 
 
 def export_correspondence(model: CorrespondenceNet, example: dict[str, np.ndarray], path: Path) -> None:
@@ -29,7 +29,7 @@ def export_correspondence(model: CorrespondenceNet, example: dict[str, np.ndarra
         {0: vertices, 1: width},
     )
     inputs = tuple(torch.as_tensor(example[name]) for name in CORRESPONDENCE_INPUTS)
-    _export(model, inputs, path, CORRESPONDENCE_INPUTS, CORRESPONDENCE_OUTPUTS, shapes)
+    export_graph(model, inputs, path, CORRESPONDENCE_INPUTS, CORRESPONDENCE_OUTPUTS, shapes)
 
 
 def correspondence_parity(model: CorrespondenceNet, path: Path, parts: list[dict[str, np.ndarray]]) -> float:
@@ -44,5 +44,5 @@ def correspondence_parity(model: CorrespondenceNet, path: Path, parts: list[dict
         with torch.no_grad():
             expected = model.place(model.eval().heads(*inputs, stencil_matrices(inputs[4], inputs[5])))
         got = graph.run(None, {name: part[name] for name in CORRESPONDENCE_INPUTS})
-        worst = max(worst, *(_relative(g, e.numpy()) for g, e in zip(got, expected, strict=True)))
+        worst = max(worst, *(relative_difference(g, e.numpy()) for g, e in zip(got, expected, strict=True)))
     return worst

@@ -141,7 +141,7 @@ def told_predictor(union: UnionOperator) -> ToldPredictor | None:
 def served_predictors(models: Path, batch: int = 1024) -> tuple[UnionPredictor, dict[str, RegionPredictor]]:
     """The exported ONNX graphs of a models folder as the evaluator's predictors: how a committed
     model (this one or an earlier one) scores on a data set it was not evaluated on."""
-    from training.learning.export import session
+    from training.onnx_export import session
 
     union_graph, localizer_graph = session(models / UNION_FILE), session(models / LOCALIZER_FILE)
 
@@ -156,7 +156,7 @@ def served_predictors(models: Path, batch: int = 1024) -> tuple[UnionPredictor, 
 
 def served_told_predictor(models: Path, batch: int = 1024) -> ToldPredictor | None:
     """The exported union graph told each pair's overlap, or None for a graph without that input."""
-    from training.learning.export import session
+    from training.onnx_export import session
 
     graph = session(models / UNION_FILE)
     if not reads_overlap(graph):

@@ -18,10 +18,10 @@ from app.inference.manifest import write_manifest
 from training.learning.card import replace_block
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
-from training.learning.export import decoder_parity, export_decoder
 from training.reconstruction.bodies import BODIES_FILE
 from training.reconstruction.decoder import DecoderConfig, ShapeBasis
 from training.reconstruction.evaluate import evaluate_decoder
+from training.reconstruction.export import decoder_parity, export_decoder
 from training.reconstruction.train import DecoderTraining, data_set_rest_bodies, split_bodies, train_decoder
 
 METRICS_FILE = "reconstruction.json"

@@ -14,8 +14,7 @@ from app.api.examples import success
 from app.api.metrics import INFERENCE
 from app.api.operands import ScaleQuery, UnitsQuery, upload_options
 from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, ProblemError, problem_responses
-from app.api.routes.spectrum import NPZ_MEDIA_TYPE
-from app.api.routes.unions import MODEL_VERSION_FIELD
+from app.api.responses import MODEL_VERSION_FIELD, NPZ_MEDIA_TYPE
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
 from app.geometry.pipeline import Solved
 from app.inference.correspondence import Placement, region_token

@@ -11,8 +11,8 @@ from pydantic import Field
 from app.api.deps import ModelsDep, SettingsDep, ToldDep
 from app.api.examples import success
 from app.api.metrics import INFERENCE
-from app.api.operands import FilesField, ScaleQuery, SpectraField, UnitsQuery
-from app.api.routes.unions import UNION_PROBLEMS, UnionResponse
+from app.api.operands import OperandsDep
+from app.api.responses import UNION_PROBLEMS, UnionResponse
 from app.api.unions import union_of_operands
 from app.inference.correspondence import region_token
 from app.inference.template import coloured_template
@@ -56,10 +56,7 @@ async def localize(
     settings: SettingsDep,
     models: ModelsDep,
     told: ToldDep,
-    files: FilesField = None,
-    spectra: SpectraField = None,
-    units: UnitsQuery = "m",
-    scale: ScaleQuery = None,
+    operands: OperandsDep,
     format: Annotated[
         Literal["json", "ply"], Query(description="ply: the template mesh with the region as vertex colours.")
     ] = "json",
@@ -68,7 +65,7 @@ async def localize(
     covers: for uploaded parts, the union of the regions their vertices are placed on (the
     correspondence model); for spectra, the localizer's region of the union, as large as its
     probabilities expect, grown to hold each operand's own region."""
-    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told, locate=True)
+    outcome = await union_of_operands(request, settings, models, operands, told, locate=True)
     confidence = None
     if outcome.regions is not None:
         region, confidence = await anyio.to_thread.run_sync(models.placed_region, outcome.regions, outcome.placed)

@@ -10,7 +10,7 @@ from pydantic import BaseModel, Field
 from app.api.deps import ModelsDep
 from app.api.examples import success
 from app.api.problems import MODEL_SLUGS, problem_responses
-from app.api.routes.unions import MODEL_VERSION_FIELD
+from app.api.responses import MODEL_VERSION_FIELD
 from app.contract import INTERVAL_Z
 from app.inference.template import PART_NAMES
 from app.retrieval.store import StoreUnavailable

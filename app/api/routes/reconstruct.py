@@ -26,14 +26,11 @@ from app.api.deps import ModelsDep, SettingsDep, ToldDep
 from app.api.examples import success
 from app.api.operands import (
     CapHolesQuery,
-    FilesField,
-    ScaleQuery,
-    SpectraField,
-    UnitsQuery,
+    OperandsDep,
 )
 from app.api.problems import ProblemError, problem_responses
 from app.api.rebuilt import RoundTrip, rebuilt_body
-from app.api.routes.unions import UNION_PROBLEMS, UnionResponse
+from app.api.responses import UNION_PROBLEMS, UnionResponse
 from app.api.unions import union_of_operands
 from app.inference.body import body_height, surface_area
 
@@ -93,10 +90,7 @@ async def reconstruct(
     settings: SettingsDep,
     models: ModelsDep,
     told: ToldDep,
-    files: FilesField = None,
-    spectra: SpectraField = None,
-    units: UnitsQuery = "m",
-    scale: ScaleQuery = None,
+    operands: OperandsDep,
     cap_holes: CapHolesQuery = False,
     format: Annotated[
         Literal["json", "ply"],
@@ -111,7 +105,7 @@ async def reconstruct(
         raise ProblemError(
             501, "reconstruction-unavailable", "Reconstruction unavailable", "these models have no shape decoder"
         )
-    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told, cap_holes)
+    outcome = await union_of_operands(request, settings, models, operands, told, cap_holes=cap_holes)
     body = await rebuilt_body(request, models, outcome.result)
     height, area = body_height(body.vertices), surface_area(body.vertices, models.template.faces)
     warnings = [*outcome.warnings, *round_trip_warnings(body.verdict, body.gap)]

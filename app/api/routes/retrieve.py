@@ -29,10 +29,7 @@ from app.api.deps import ModelsDep, SettingsDep, StoreDep, ToldDep
 from app.api.examples import success
 from app.api.operands import (
     CapHolesQuery,
-    FilesField,
-    ScaleQuery,
-    SpectraField,
-    UnitsQuery,
+    OperandsDep,
 )
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.api.rebuilt import RebuiltBody, rebuilt_body
@@ -154,10 +151,7 @@ async def retrieve(
     models: ModelsDep,
     told: ToldDep,
     store: StoreDep,
-    files: FilesField = None,
-    spectra: SpectraField = None,
-    units: UnitsQuery = "m",
-    scale: ScaleQuery = None,
+    operands: OperandsDep,
     top: Annotated[int, Query(ge=1, le=MAX_TOP, description="Number of matches.")] = 10,
     rebuild: Annotated[
         bool,
@@ -177,7 +171,7 @@ async def retrieve(
 ) -> RetrieveResponse:
     """The stored complete shapes nearest to the union of the operands (an open one through its rebuilt body,
     two operands whose overlap is not told by their share profile)."""
-    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told, cap_holes)
+    outcome = await union_of_operands(request, settings, models, operands, told, cap_holes=cap_holes)
     looked_up, ranked_by, notes = await looked_up_spectra(request, models, outcome, rebuild, profile)
     matches, first = await ranked(store, looked_up, ranked_by, top)
     return RetrieveResponse(

@@ -11,6 +11,7 @@ from app.api.deps import SettingsDep
 from app.api.examples import success
 from app.api.operands import CapHolesQuery, solve_upload, upload_options
 from app.api.problems import UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
+from app.api.responses import NPZ_MEDIA_TYPE
 from app.core.errors import InputError
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
 from app.geometry.overlap import footprint_token
@@ -18,7 +19,6 @@ from app.geometry.pipeline import SpectrumReport
 from app.geometry.spectrum import DEFAULT_K, MAX_K
 
 router = APIRouter(tags=["spectra"])
-NPZ_MEDIA_TYPE = "application/x-npz"  # numpy's zip of NPY arrays; np.load reads it
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -4,66 +4,15 @@ Operands are uploaded files and/or spectra (see :mod:`app.api.operands`), in 1/m
 more than two operands is folded left to right, exactly as the operator was trained to chain.
 """
 
-from typing import Literal
-
 from fastapi import APIRouter, Request
-from pydantic import BaseModel, Field
 
 from app.api.deps import ModelsDep, SettingsDep, ToldDep
 from app.api.examples import success
-from app.api.operands import FilesField, ScaleQuery, SpectraField, UnitsQuery
-from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
+from app.api.operands import OperandsDep
+from app.api.responses import UNION_PROBLEMS, UnionResponse
 from app.api.unions import union_of_operands
 
 router = APIRouter(tags=["unions"])
-# What the union-based routes can answer: an upload's problems, and the models'.
-UNION_PROBLEMS = problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS)
-MODEL_VERSION_FIELD = Field(description="Content hash of the ONNX models: replicas agree iff they serve the same.")
-
-
-class OperandSpectrum(BaseModel):
-    source: str = Field(description="files[i] <name> or spectra[i].")
-    eigenvalues: list[float] = Field(description="The operand's own spectrum, 1/m²: send it back as a spectrum.")
-
-
-class UnionResponse(BaseModel):
-    eigenvalues: list[float] = Field(description="Spectrum of the union, 1/m², non-decreasing.")
-    sigma: list[float] = Field(description="Per-eigenvalue standard deviation, calibrated on held-out pairs.")
-    lower: list[float] = Field(description="Lower end of the 90 % interval.")
-    upper: list[float] = Field(description="Upper end of the 90 % interval.")
-    operands: list[OperandSpectrum] = Field(description="Each operand's own spectrum, for caching.")
-    model_version: str = MODEL_VERSION_FIELD
-    solve_ms: float = Field(description="Eigen-solves of the uploaded files.")
-    inference_ms: float = Field(description="The union operator's time.")
-    overlaps: list[float] = Field(
-        default_factory=list,
-        description="Each union step's overlap (share of the smaller operand inside the other), as told in "
-        "overlap or measured with measure_overlap; empty when neither.",
-    )
-    boundaries: list[float] = Field(
-        default_factory=list,
-        description="Each union step's boundary share (how much of the two operands' boundary length is left on "
-        "the union's), as told in boundary or measured with measure_overlap by models that read it; empty when "
-        "neither.",
-    )
-    overlaps_from: Literal["told", "footprints", "correspondence"] | None = Field(
-        None,
-        description="Where overlaps and boundaries came from: told by the client (overlap, boundary), measured "
-        "from registered views (measure_overlap), or from the operands' places on the template (the "
-        "correspondence model's, whenever every operand is an uploaded file or a spectrum sent with its region, "
-        "and the client told nothing); null when none.",
-    )
-    overlaps_told: list[bool] = Field(
-        default_factory=list,
-        description="Per union step, whether the union operator was told its overlap (a client's own always is; "
-        "one measured from the parts' places where the model card's validation pairs show it helps: below the "
-        "graph's threshold).",
-    )
-    warnings: list[str] = Field(
-        default_factory=list,
-        description="What looks wrong though it was answered: an uploaded shape's implausible area, or "
-        "operands more than 10× apart in size (a unit slip?), each naming its operand.",
-    )
 
 
 @router.post(
@@ -76,15 +25,12 @@ async def union(
     settings: SettingsDep,
     models: ModelsDep,
     told: ToldDep,
-    files: FilesField = None,
-    spectra: SpectraField = None,
-    units: UnitsQuery = "m",
-    scale: ScaleQuery = None,
+    operands: OperandsDep,
 ) -> UnionResponse:
     """Spectrum of the union of partial scans of one body, with a 90 % interval.
 
     Two or more operands fold left to right, ((A ∪ B) ∪ C) ∪ …; one operand is returned as is
     (σ = 0). The result is exactly the same whichever order two operands come in.
     """
-    outcome = await union_of_operands(request, settings, models, files, spectra, units, scale, told)
+    outcome = await union_of_operands(request, settings, models, operands, told)
     return UnionResponse(**outcome.fields(models))

@@ -7,13 +7,14 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("onnxscript")
 
 from app.contract import RECONSTRUCTION_INPUTS  # noqa: E402
-from training.learning.export import decoder_parity, export_decoder, session  # noqa: E402
+from training.onnx_export import session  # noqa: E402
 from training.reconstruction.decoder import (  # noqa: E402
     DecoderConfig,
     ShapeBasis,
     SpectrumDecoder,
     SpectrumNetwork,
 )
+from training.reconstruction.export import decoder_parity, export_decoder  # noqa: E402
 
 
 @pytest.fixture

@@ -1,0 +1,59 @@
+"""What several routes answer alike, in one place they import rather than each other: the union's
+answer (``/v1/localize`` and ``/v1/reconstruct`` extend it) and the problems every union-based
+route can answer, the models' version field, and the media type of ``.npz`` answers."""
+
+from typing import Literal
+
+from pydantic import BaseModel, Field
+
+from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
+
+NPZ_MEDIA_TYPE = "application/x-npz"  # numpy's zip of NPY arrays; np.load reads it
+# What the union-based routes can answer: an upload's problems, and the models'.
+UNION_PROBLEMS = problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS)
+MODEL_VERSION_FIELD = Field(description="Content hash of the ONNX models: replicas agree iff they serve the same.")
+
+
+class OperandSpectrum(BaseModel):
+    source: str = Field(description="files[i] <name> or spectra[i].")
+    eigenvalues: list[float] = Field(description="The operand's own spectrum, 1/m²: send it back as a spectrum.")
+
+
+class UnionResponse(BaseModel):
+    eigenvalues: list[float] = Field(description="Spectrum of the union, 1/m², non-decreasing.")
+    sigma: list[float] = Field(description="Per-eigenvalue standard deviation, calibrated on held-out pairs.")
+    lower: list[float] = Field(description="Lower end of the 90 % interval.")
+    upper: list[float] = Field(description="Upper end of the 90 % interval.")
+    operands: list[OperandSpectrum] = Field(description="Each operand's own spectrum, for caching.")
+    model_version: str = MODEL_VERSION_FIELD
+    solve_ms: float = Field(description="Eigen-solves of the uploaded files.")
+    inference_ms: float = Field(description="The union operator's time.")
+    overlaps: list[float] = Field(
+        default_factory=list,
+        description="Each union step's overlap (share of the smaller operand inside the other), as told in "
+        "overlap or measured with measure_overlap; empty when neither.",
+    )
+    boundaries: list[float] = Field(
+        default_factory=list,
+        description="Each union step's boundary share (how much of the two operands' boundary length is left on "
+        "the union's), as told in boundary or measured with measure_overlap by models that read it; empty when "
+        "neither.",
+    )
+    overlaps_from: Literal["told", "footprints", "correspondence"] | None = Field(
+        None,
+        description="Where overlaps and boundaries came from: told by the client (overlap, boundary), measured "
+        "from registered views (measure_overlap), or from the operands' places on the template (the "
+        "correspondence model's, whenever every operand is an uploaded file or a spectrum sent with its region, "
+        "and the client told nothing); null when none.",
+    )
+    overlaps_told: list[bool] = Field(
+        default_factory=list,
+        description="Per union step, whether the union operator was told its overlap (a client's own always is; "
+        "one measured from the parts' places where the model card's validation pairs show it helps: below the "
+        "graph's threshold).",
+    )
+    warnings: list[str] = Field(
+        default_factory=list,
+        description="What looks wrong though it was answered: an uploaded shape's implausible area, or "
+        "operands more than 10× apart in size (a unit slip?), each naming its operand.",
+    )
