@@ -11,9 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.readme_examples import URL, Example, client_code, readme_commands, run, run_client
-from tests.api.servers import start, wait_ready
-from tests.postgres import free_port
+from benchmarks.readme_examples import KEY, URL, Example, client_code, readme_commands, run, run_client
+from tests.api.servers import serving
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
@@ -24,18 +23,8 @@ pytestmark = pytest.mark.skipif(
 
 @pytest.fixture(scope="module")
 def service(tmp_path_factory):
-    port = free_port()
-    settings = {
-        "SPECTRAL_UNIONS_DATABASE_PATH": str(tmp_path_factory.mktemp("db") / "shapes.sqlite"),
-        "SPECTRAL_UNIONS_API_KEY": "change-me",
-    }
-    process = start(port, settings)
-    try:
-        wait_ready(f"http://127.0.0.1:{port}", process)
+    for port in serving(tmp_path_factory.mktemp("db"), SPECTRAL_UNIONS_API_KEY=KEY):
         yield f"http://127.0.0.1:{port}"
-    finally:
-        process.kill()
-        process.wait(timeout=30)
 
 
 @pytest.fixture(scope="module")

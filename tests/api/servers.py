@@ -4,10 +4,13 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from pathlib import Path
 
 import httpx
 
 from tests.api.conftest import API_KEY
+from tests.postgres import free_port
 
 STARTUP_SECONDS = 60
 
@@ -37,3 +40,16 @@ def wait_ready(base: str, process: subprocess.Popen) -> None:
             pass
         time.sleep(0.2)
     raise TimeoutError(f"{base} not ready after {STARTUP_SECONDS} s")
+
+
+def serving(folder: Path, **settings: str) -> Iterator[int]:
+    """A ready service (:func:`start`) with its SQLite database in ``folder`` and ``settings``;
+    yields its port, and stops it after (a module fixture's body)."""
+    port = free_port()
+    process = start(port, {"SPECTRAL_UNIONS_DATABASE_PATH": str(folder / "shapes.sqlite"), **settings})
+    try:
+        wait_ready(f"http://127.0.0.1:{port}", process)
+        yield port
+    finally:
+        process.kill()
+        process.wait(timeout=30)

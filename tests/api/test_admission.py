@@ -13,33 +13,20 @@ import httpx
 import numpy as np
 import pytest
 
-from tests.api.servers import start, wait_ready
+from tests.api.servers import serving
 from tests.api.test_backpressure import patch_ply
-from tests.postgres import free_port
 
 BODY_TIMEOUT_S = 5
 CAPACITY = 2  # one solve slot and one waiting place
 
 
-def _serving(tmp_path_factory, **settings: str):
-    """A live server with the body deadline of these tests and ``settings`` (environment names)."""
-    port = free_port()
-    environment = {
-        "SPECTRAL_UNIONS_DATABASE_PATH": str(tmp_path_factory.mktemp("db") / "shapes.sqlite"),
-        "SPECTRAL_UNIONS_BODY_TIMEOUT_SECONDS": str(BODY_TIMEOUT_S),
-    } | settings
-    process = start(port, environment)
-    try:
-        wait_ready(f"http://127.0.0.1:{port}", process)
-        yield port
-    finally:
-        process.kill()
-        process.wait(timeout=30)
-
-
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    yield from _serving(tmp_path_factory, SPECTRAL_UNIONS_MAX_QUEUED_SOLVES=str(CAPACITY - 1))
+    yield from serving(
+        tmp_path_factory.mktemp("db"),
+        SPECTRAL_UNIONS_MAX_QUEUED_SOLVES=str(CAPACITY - 1),
+        SPECTRAL_UNIONS_BODY_TIMEOUT_SECONDS=str(BODY_TIMEOUT_S),
+    )
 
 
 def _stalled_upload(port: int, path: str = "/v1/spectrum", body: bytes = b"--b\r\n") -> socket.socket:
@@ -165,8 +152,9 @@ def test_a_route_that_may_solve_is_counted_in_even_with_url_encoded_spectra(serv
 @pytest.fixture(scope="module")
 def budgeted_server(tmp_path_factory):
     """Room for four uploads, and bytes in flight for one body of the upload cap and a half."""
-    yield from _serving(
-        tmp_path_factory,
+    yield from serving(
+        tmp_path_factory.mktemp("db"),
+        SPECTRAL_UNIONS_BODY_TIMEOUT_SECONDS=str(BODY_TIMEOUT_S),
         SPECTRAL_UNIONS_MAX_QUEUED_SOLVES="3",
         SPECTRAL_UNIONS_MAX_INFLIGHT_UPLOAD_BYTES=str(96 * 1024 * 1024),
     )

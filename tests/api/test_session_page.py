@@ -29,8 +29,7 @@ from app.core.config import Settings
 from app.geometry.topology import drop_unreferenced
 from app.inference.template import Template
 from app.samples import SESSION_SCANS, write_samples
-from tests.api.servers import start, wait_ready
-from tests.postgres import free_port
+from tests.api.servers import serving
 from training.reconstruction.blind_spots import above_soles
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -53,14 +52,8 @@ def scans(tmp_path_factory) -> list[Path]:
 
 @pytest.fixture(scope="module")
 def base(tmp_path_factory):
-    port = free_port()
-    process = start(port, {"SPECTRAL_UNIONS_DATABASE_PATH": str(tmp_path_factory.mktemp("db") / "shapes.sqlite")})
-    try:
-        wait_ready(f"http://127.0.0.1:{port}", process)
+    for port in serving(tmp_path_factory.mktemp("db")):
         yield f"http://127.0.0.1:{port}"
-    finally:
-        process.kill()
-        process.wait(timeout=30)
 
 
 @pytest.fixture(scope="module")
