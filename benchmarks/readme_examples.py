@@ -6,8 +6,9 @@ it answered.
 
 Writes the samples (``spectral-unions samples``) to a temporary folder and runs each command of
 :func:`examples` there with bash (curl and jq, as a reader would), then replaces the block
-between ``<!-- examples:begin -->`` and ``<!-- examples:end -->`` in ``README.md`` with the
-commands and their answers (long lists cut to three values), the Python client example's
+between ``<!-- examples:begin -->`` and ``<!-- examples:end -->`` in ``docs/api.md`` with the
+commands and their answers (long lists cut to three values), the same block in ``README.md``
+with the tour's few, the Python client example's
 printed output with what it prints now, and ``app/api/examples.json`` (the OpenAPI page's
 success examples) with the answers rounded to three decimals. What the README
 shows is what its commands print, so they run verbatim (``tests/test_readme_examples.py``).
@@ -30,7 +31,7 @@ from app.inference.template import Template
 from app.samples import sample_overlap, write_samples
 
 ROOT = Path(__file__).resolve().parents[1]
-README, EXAMPLES = ROOT / "README.md", ROOT / "app" / "api" / "examples.json"
+README, API_DOC, EXAMPLES = ROOT / "README.md", ROOT / "docs" / "api.md", ROOT / "app" / "api" / "examples.json"
 BEGIN, END = "<!-- examples:begin -->", "<!-- examples:end -->"
 CLIENT_BEGIN, CLIENT_END = "<!-- client:begin -->", "<!-- client:end -->"
 URL = "http://127.0.0.1:8000"  # as the README writes it; a test runs the commands against its own
@@ -112,6 +113,7 @@ class Example:
     command: str  # as the README shows it and bash runs it, in the samples folder
     show: Callable[[str], str] = as_json  # what the README shows of its output
     record: str | None = None  # its name among the OpenAPI page's examples, if it is one
+    tour: bool = False  # also shown in the README's short tour (docs/api.md shows them all)
 
 
 def examples(overlap: float) -> list[Example]:
@@ -124,9 +126,9 @@ def examples(overlap: float) -> list[Example]:
     header = "sed '/end_header/q'"  # a PLY's text header, up to its end
     status = "-o /dev/null -w '%{http_code}\\n'"
     return [
-        Example(f"curl -s -F file=@no_head_neck.ply '{URL}/v1/spectrum?units=m'", record="spectrum"),
-        Example(f"curl -s {both} {URL}/v1/union", record="union"),
-        Example(f'curl -s -F "spectra=$(cat spectra.json)" {URL}/v1/union'),
+        Example(f"curl -s -F file=@no_head_neck.ply '{URL}/v1/spectrum?units=m'", record="spectrum", tour=True),
+        Example(f"curl -s {both} {URL}/v1/union", record="union", tour=True),
+        Example(f'curl -s -F "spectra=$(cat spectra.json)" {URL}/v1/union', tour=True),
         Example(f"curl -s -F \"spectra=$(cat spectra.json)\" '{URL}/v1/union?overlap={overlap}'"),
         Example(f"curl -s {both} '{URL}/v1/union?measure_overlap=true'"),
         Example(
@@ -137,11 +139,11 @@ def examples(overlap: float) -> list[Example]:
         Example("jq -c -s 'map(.footprint)' view0.json view1.json > footprints.json", as_text),
         Example(f"curl -s -F 'footprints=<footprints.json' {URL}/v1/overlap", record="overlap"),
         Example(f"curl -s -F file=@no_head_neck.ply {URL}/v1/correspondence", record="correspondence"),
-        Example(f"curl -s {both} {URL}/v1/localize", fields(*union_fields, preface=UNION_THEN), "localize"),
+        Example(f"curl -s {both} {URL}/v1/localize", fields(*union_fields, preface=UNION_THEN), "localize", True),
         Example(f"curl -s {both} '{URL}/v1/localize?format=ply' -o covered.ply && {header} covered.ply", as_text),
         Example(f"curl -s {both} {URL}/v1/reconstruct", fields(*body_fields, preface=UNION_THEN), "reconstruct"),
         Example(f"curl -s {both} '{URL}/v1/reconstruct?format=ply' -o rebuilt.ply && {header} rebuilt.ply", as_text),
-        Example(f"curl -s {both} '{URL}/v1/retrieve?top=3'", record="retrieve"),
+        Example(f"curl -s {both} '{URL}/v1/retrieve?top=3'", record="retrieve", tour=True),
         Example(f"curl -s {key} -F label=alice -F file=@body.ply {URL}/v1/shapes | tee alice.json", record="add_shape"),
         Example(f"curl -s '{URL}/v1/shapes?offset=0&limit=2'", first_of_list, "list_shapes"),
         Example(f"curl -s {status} -X DELETE {key} {URL}/v1/shapes/$(jq -r .id alice.json)", as_text),
@@ -188,26 +190,32 @@ def with_client_output(text: str, output: str) -> str:
     return text[: text.index(CLIENT_BEGIN)] + block + text[text.index(CLIENT_END) + len(CLIENT_END) :]
 
 
+def with_examples(text: str, blocks: list[str]) -> str:
+    """``text`` with its examples block replaced by ``blocks``, as a console session."""
+    block = BEGIN + "\n```console\n" + "\n\n".join(blocks) + "\n```\n" + END
+    return text[: text.index(BEGIN)] + block + text[text.index(END) + len(END) :]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--url", default=URL)
     args = parser.parse_args()
     template = Template.load(Settings().models_dir)
-    blocks, recorded = [], {}
+    shown_blocks, recorded = [], {}
     with tempfile.TemporaryDirectory() as scratch:
         folder = Path(scratch)
         write_samples(folder, template)
         for example in examples(round(sample_overlap(template), 2)):
             output = run(example, folder, args.url)
-            blocks.append(f"$ {example.command}\n{example.show(output)}".rstrip("\n"))
+            shown_blocks.append((example.tour, f"$ {example.command}\n{example.show(output)}".rstrip("\n")))
             if example.record:
                 recorded[example.record] = rounded(cut_tokens(json.loads(output)))
-        text = README.read_text()
-        text = with_client_output(text, run_client(client_code(text), folder, args.url))
-    block = BEGIN + "\n```console\n" + "\n\n".join(blocks) + "\n```\n" + END
-    README.write_text(text[: text.index(BEGIN)] + block + text[text.index(END) + len(END) :])
+        readme = README.read_text()
+        readme = with_client_output(readme, run_client(client_code(readme), folder, args.url))
+    README.write_text(with_examples(readme, [block for tour, block in shown_blocks if tour]))
+    API_DOC.write_text(with_examples(API_DOC.read_text(), [block for _, block in shown_blocks]))
     EXAMPLES.write_text(json.dumps(recorded, indent=1, ensure_ascii=False) + "\n")
-    print(f"README.md examples and {EXAMPLES.relative_to(ROOT)} written from {args.url}")
+    print(f"README.md, docs/api.md and {EXAMPLES.relative_to(ROOT)} written from {args.url}")
 
 
 if __name__ == "__main__":

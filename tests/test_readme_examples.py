@@ -1,7 +1,8 @@
-"""The README's examples run as they are written: every command of its examples block, by bash
-in a folder of samples written by the README's own command, against a live service with a write
-key; and its Python client example, by this Python. Each must succeed, and answer a problem
-exactly where the README shows one. Needs curl and jq (``.ci/run`` installs them)."""
+"""The documented examples run as they are written: every command of docs/api.md's examples
+(the README's tour is a few of them, word for word), by bash in a folder of samples written by
+the README's own command, against a live service with a write key; and the README's Python
+client example, by this Python. Each must succeed, and answer a problem exactly where the docs
+show one. Needs curl and jq (``.ci/run`` installs them)."""
 
 import json
 import shutil
@@ -16,6 +17,7 @@ from tests.api.servers import serving
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
+API_DOC = (ROOT / "docs" / "api.md").read_text()
 pytestmark = pytest.mark.skipif(
     not (shutil.which("curl") and shutil.which("jq")), reason="needs curl and jq (.ci/run installs them)"
 )
@@ -41,10 +43,17 @@ def _shown_answers(text: str) -> list[str]:
     return [lines[i + 1] if i + 1 < len(lines) else "" for i, line in enumerate(lines) if line.startswith("$ ")]
 
 
-def test_every_command_of_the_readme_runs_as_written(service, samples):
-    commands = readme_commands(README)
+def test_the_readme_tour_is_some_of_the_documented_examples_word_for_word():
+    documented = readme_commands(API_DOC)
+    tour = readme_commands(README)
+    assert tour and all(command in documented for command in tour)
+    assert [documented.index(command) for command in tour] == sorted(documented.index(command) for command in tour)
+
+
+def test_every_documented_command_runs_as_written(service, samples):
+    commands = readme_commands(API_DOC)
     assert len(commands) >= 20
-    for command, shown in zip(commands, _shown_answers(README), strict=True):
+    for command, shown in zip(commands, _shown_answers(API_DOC), strict=True):
         output = run(Example(command), samples, service)
         if output.startswith("{"):
             answer = json.loads(output)

@@ -1,5 +1,5 @@
 """The OpenAPI page documents every error as the one problem+json shape, with an example, and
-the README's errors table names every problem type the service can answer."""
+the errors table of docs/operating.md names every problem type the service can answer."""
 
 import json
 import re
@@ -36,9 +36,9 @@ def _subclasses(cls: type) -> set[type]:
     return {cls} | {grand for sub in cls.__subclasses__() for grand in _subclasses(sub)}
 
 
-def test_the_readme_errors_table_names_every_problem_type():
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    table = readme[readme.index("### Errors") : readme.index("## Configuration")]
+def test_the_errors_table_names_every_problem_type():
+    operating = (Path(__file__).resolve().parents[2] / "docs" / "operating.md").read_text()
+    table = operating[operating.index("## Errors") : operating.index("## Configuration")]
     listed = set(re.findall(r"^\| \d{3} \| `([a-z-]+)` \|", table, re.MULTILINE))
     raised = {error.slug for error in _subclasses(InputError)}
     documented = {slug for examples in EXAMPLES.values() for slug, _, _ in examples}
