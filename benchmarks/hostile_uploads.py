@@ -18,7 +18,9 @@ the service on a free port with its defaults (a solver worker per core), then ru
 3. **probe**: each file of an independent probe that was misread, a 500 or dear to refuse,
    sent once (counts of thousands of digits, a PLY read two ways, unbudgeted text, decimal
    commas, byte-order marks, GLB storage trimesh misreads, faces wound both ways): its status,
-   problem type and time, and whether any answer was a 5xx.
+   problem type and time, and whether any answer was a 5xx; then a repeated form field under a
+   capitalized media type, and the size warning of operands one of which has no positive
+   eigenvalue (which operands it names).
 4. **crowd**: a union of ``--union-files`` parts, and while its solves run a normal upload;
    then eight chunked bodies that trickle a byte at a time, and a normal upload beside them:
    what the normal uploads got, and how long they took.
@@ -138,7 +140,30 @@ async def probe_scenario(url: str, part: bytes) -> dict:
                 "ms": round(1e3 * elapsed, 1),
                 "holes_filled": answer.get("holes_filled"),
             }
+        rows.update(await _probe_forms(http, url))
     return {"files": rows, "server_errors": sum(row["status"] >= 500 for row in rows.values())}
+
+
+async def _probe_forms(http: httpx.AsyncClient, url: str) -> dict[str, dict]:
+    """The probe's form reproducers: a repeated field under a capitalized media type, and the
+    size warning of operands one of which has no positive eigenvalue."""
+    spectrum = np.linspace(1.0, 20.0, 20)
+    field = b'--b\r\nContent-Disposition: form-data; name="spectra"\r\n\r\n[[1, 2]]\r\n'
+    repeated = await http.post(
+        f"{url}/v1/union", content=field * 2 + b"--b--\r\n", headers={"content-type": "Multipart/Form-Data; boundary=b"}
+    )
+    spectra = json.dumps([np.zeros(20).tolist(), spectrum.tolist(), (1e4 * spectrum).tolist()])
+    warned = await http.post(f"{url}/v1/union", data={"spectra": spectra})
+    return {
+        "two spectra fields, 'Multipart/Form-Data'": {
+            "status": repeated.status_code,
+            "type": repeated.json().get("type", ""),
+        },
+        "size warning of [zeros, A, A of a body 100x smaller]": {
+            "status": warned.status_code,
+            "warning": (warned.json().get("warnings") or [""])[0][:40],
+        },
+    }
 
 
 async def _trickle(port: int, stop: asyncio.Event) -> None:
