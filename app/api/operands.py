@@ -10,6 +10,7 @@ import asyncio
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Annotated, Literal
 
 from fastapi import Depends, File, Form, Query, Request, UploadFile
@@ -20,7 +21,7 @@ from app.api.problems import ProblemError
 from app.api.solver import SolverPool
 from app.core.config import Settings
 from app.core.errors import InputError
-from app.geometry.descriptors import PartInputs
+from app.geometry.descriptors import PartInputs, Places
 from app.geometry.io import resolve_file_type
 from app.geometry.overlap import Footprint
 from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport
@@ -82,7 +83,7 @@ class Wanted:
 
     footprints: bool = False  # where it lies (app.geometry.overlap): registered views are measured
     cap_holes: bool = False  # its holes capped: the one operand is a whole-body scan
-    descriptors: bool = False  # what the correspondence network reads of it
+    place_with: Path | None = None  # the correspondence graph: where it lies on the template
 
 
 SPECTRA_ONLY = Wanted()
@@ -175,6 +176,7 @@ class Operand:
     report: SpectrumReport | None  # what the solve found, for files
     footprint: Footprint | None = None  # where an uploaded shape lies, when asked for
     part: PartInputs | None = None  # what the correspondence network reads of an upload, when asked for
+    places: Places | None = None  # where the network placed it, when the solver worker did
 
 
 def parse_spectra(text: str | None, k: int) -> list[list[float]]:
@@ -276,7 +278,7 @@ async def resolve_operands(
         if isinstance(outcome, BaseException):
             raise outcome  # the first failing file, in upload order
     operands = [
-        Operand(source, solved.report.eigenvalues, solved.report, solved.footprint, solved.part)
+        Operand(source, solved.report.eigenvalues, solved.report, solved.footprint, solved.part, solved.places)
         for source, solved in zip(sources, outcomes, strict=True)
     ]
     operands += [Operand(f"spectra[{i}]", values, None) for i, values in enumerate(given)]
@@ -298,7 +300,7 @@ async def _solve_all(
         data = await upload.read()
         file_type = resolve_file_type(upload.filename, None)
         return await solver.solve_with_functions(
-            data, file_type, options, vectors=False, footprint=wanted.footprints, descriptors=wanted.descriptors
+            data, file_type, options, vectors=False, footprint=wanted.footprints, place_with=wanted.place_with
         )
 
     return list(await asyncio.gather(*(solve(upload) for upload in files), return_exceptions=True))

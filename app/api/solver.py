@@ -23,6 +23,8 @@ import gc
 import multiprocessing
 import os
 import resource
+from dataclasses import replace
+from pathlib import Path
 
 import anyio
 import numpy as np
@@ -34,9 +36,10 @@ from app.api.metrics import SOLVES
 from app.api.problems import ProblemError
 from app.core.errors import InputError
 from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport, solve_bytes
+from app.inference.correspondence import places_in_worker
 
 RETRY_AFTER_SECONDS = 1  # a solve takes ~0.1–0.3 s: a place frees within a second
-_PRELOADED = ["app.geometry.pipeline"]
+_PRELOADED = ["app.geometry.pipeline", "app.inference.correspondence"]  # onnxruntime for placing
 _CONTEXT = multiprocessing.get_context("forkserver")
 
 
@@ -68,7 +71,13 @@ def _map_blas_buffers() -> None:
 
 
 def _solve_task(
-    data: bytes, file_type: str, options: SpectrumOptions, vectors: bool, footprint: bool, descriptors: bool
+    data: bytes,
+    file_type: str,
+    options: SpectrumOptions,
+    vectors: bool,
+    footprint: bool,
+    descriptors: bool,
+    place_with: str | None = None,
 ) -> Solved:
     """The worker's task: a solve, with a memory failure answered without its traceback.
 
@@ -77,10 +86,15 @@ def _solve_task(
     task has finished, so those arrays stayed mapped under the cap while the next upload was
     solved: a small patch after a failed large grid found ~8 MB of a 120 MB cap free and failed
     too, or not, by how far the large solve had got. The new error is raised once the handler
-    has let the old one go, so the worker is back at its idle size when it answers.
+    has let the old one go, so the worker is back at its idle size when it answers. With
+    ``place_with`` (the correspondence graph's path) the part is placed here too, under the same
+    cap and deadline.
     """
     try:
-        return solve_bytes(data, file_type, options, vectors=vectors, footprint=footprint, descriptors=descriptors)
+        solved = solve_bytes(data, file_type, options, vectors=vectors, footprint=footprint, descriptors=descriptors)
+        if place_with is None or solved.part is None:
+            return solved
+        return replace(solved, places=places_in_worker(place_with, solved.part))
     except MemoryError:
         pass
     gc.collect()
@@ -159,12 +173,15 @@ class SolverPool:
         vectors: bool = True,
         footprint: bool = False,
         descriptors: bool = False,
+        place_with: Path | None = None,
     ) -> Solved:
         """The solve with (``vectors``) its eigenfunctions and their vertices' provenance,
         (``footprint``) where the shape lies (:mod:`app.geometry.overlap`) and (``descriptors``)
-        what the correspondence network reads of it (:mod:`app.geometry.descriptors`)."""
+        what the correspondence network reads of it (:mod:`app.geometry.descriptors`), and with
+        ``place_with`` (the graph's path) where that network places it."""
         async with self.limiter:
-            task = (data, file_type, options, vectors, footprint, descriptors)
+            place = str(place_with) if place_with is not None else None
+            task = (data, file_type, options, vectors, footprint, descriptors or place is not None, place)
             future = self._pool.schedule(_solve_task, args=task, timeout=self.timeout_s)
             try:
                 solved: Solved = await asyncio.wrap_future(future)

@@ -108,7 +108,8 @@ async def union_of_operands(
     steps = bool(files) and len(files) + (len(carried) if carried else 0) > 1
     only_placeable = not (spectra and spectra.strip()) or carried is not None
     places = models.correspondence is not None and bool(files) and only_placeable and (locate or steps)
-    wanted = Wanted(footprints=told.measure, cap_holes=cap_holes, descriptors=places)
+    place_with = models.correspondence.path if places else None
+    wanted = Wanted(footprints=told.measure, cap_holes=cap_holes, place_with=place_with)
     operands, solve_ms = await resolve_operands(request, settings, sent, models.k, check_overlaps, wanted)
     source: OverlapSource | None = "told" if overlaps is not None else None
     if told.measure:  # k-d trees of up to UNION_POINTS points per step: off the event loop
@@ -169,10 +170,17 @@ def _worth_telling(
 
 
 def _placed(models: SpectralModels, operands: list[Operand]) -> list[PlacedPart]:
-    """Every uploaded operand placed on the template by the correspondence model (timed); spectra
-    operands have nothing to place (their regions, if any, were carried)."""
-    with INFERENCE.labels("correspondence").time():
-        return [models.correspondence.placed(operand.part) for operand in operands if operand.part is not None]
+    """Every uploaded operand placed on the template: the graph ran in the solver worker that
+    solved it (its time observed here), its places become a region here; spectra operands have
+    nothing to place (their regions, if any, were carried)."""
+    placed = []
+    for operand in operands:
+        if operand.part is None:
+            continue
+        if operand.places is not None:
+            INFERENCE.labels("correspondence").observe(operand.places.graph_ms / 1e3)
+        placed.append(models.correspondence.placed(operand.part, operand.places))
+    return placed
 
 
 def _carried_regions(text: str | None, spectra: str | None, models: SpectralModels) -> list[np.ndarray] | None:

@@ -101,3 +101,13 @@ def heat_signature(values: np.ndarray, basis: np.ndarray) -> np.ndarray:
     k/area, the part's size, which is information too."""
     heat = (basis**2) @ np.exp(-np.outer(values, HKS_TIMES))  # (n, times), 1/m²
     return np.log(np.maximum(4 * np.pi * HKS_TIMES * heat, 1e-6))
+
+
+@dataclass(frozen=True)
+class Places:
+    """What the correspondence graph answered for one part (app.inference.correspondence runs it,
+    in the solver worker that computed its inputs)."""
+
+    position: np.ndarray  # (n, 3) float32, rest-pose template coordinates, metres
+    confidence: np.ndarray  # (n,) float32
+    graph_ms: float

@@ -11,7 +11,7 @@ from pydantic import Field
 
 from app.contract import MAX_HOLE_EDGES
 from app.core.errors import InputError
-from app.geometry.descriptors import PartInputs, cloud_inputs, mesh_inputs
+from app.geometry.descriptors import PartInputs, Places, cloud_inputs, mesh_inputs
 from app.geometry.errors import InvalidGeometry
 from app.geometry.io import load_shape, unit_scale
 from app.geometry.laplacian import Operators, mesh_operators, point_cloud_operators
@@ -83,6 +83,7 @@ class Solved:
     sources: np.ndarray  # (vertices,): index in the uploaded vertex list, -1 for a pin-hole's centre
     footprint: Footprint | None = None  # with ``footprint``: where the shape lies, to measure overlaps by
     part: PartInputs | None = None  # with ``descriptors``: what the correspondence network reads of it
+    places: Places | None = None  # where the correspondence graph placed it, when the solver worker ran it
 
     def npz(self) -> bytes:
         """The eigenfunctions as the API and the CLI hand them out: an ``.npz`` of NPY arrays

@@ -10,6 +10,7 @@ no registration. Optional: the service serves everything else without it.
 
 import base64
 import binascii
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,7 +21,7 @@ from scipy.spatial import cKDTree
 
 from app.contract import CORRESPONDENCE_INPUTS
 from app.core.errors import InputError
-from app.geometry.descriptors import PartInputs
+from app.geometry.descriptors import PartInputs, Places
 from app.geometry.laplacian import Operators
 from app.inference.template import RegionBoundaries, Template, edge_graph
 
@@ -154,10 +155,12 @@ class TemplateRegions:
         return overlaps, boundaries
 
 
-class CorrespondenceModel:
-    """The ONNX correspondence graph and the template it places parts on."""
+class PlacingGraph:
+    """The ONNX correspondence graph alone: a part's inputs → each vertex's place and confidence.
+    What a solver worker runs (:func:`places_in_worker`), so that the graph's memory and time
+    fall under the worker's cap and deadline, not the API process's."""
 
-    def __init__(self, path: Path, regions: TemplateRegions, threads: int = 1) -> None:
+    def __init__(self, path: Path, threads: int = 1) -> None:
         options = ort.SessionOptions()
         options.intra_op_num_threads = threads
         options.inter_op_num_threads = 1
@@ -165,23 +168,51 @@ class CorrespondenceModel:
         names = tuple(node.name for node in self.session.get_inputs())
         if names != CORRESPONDENCE_INPUTS:
             raise ValueError(f"the correspondence graph reads {names}, not {CORRESPONDENCE_INPUTS}")
-        self.regions = regions
         metadata = self.session.get_modelmeta().custom_metadata_map
         self.tell_below = float(metadata.get(TELL_BELOW_KEY, 0.0))
 
-    def place(self, inputs: PartInputs) -> Placement:
-        """Each vertex of a part (its inputs from app.geometry.descriptors) on the template."""
+    def run(self, inputs: PartInputs) -> Places:
+        started = time.perf_counter()
         position, confidence = self.session.run(None, inputs.feeds())
         if not (np.isfinite(position).all() and np.isfinite(confidence).all()):
             raise ValueError("the correspondence graph returned non-finite places")
-        position = position.astype(np.float64)
+        return Places(position, confidence, (time.perf_counter() - started) * 1e3)
+
+
+_WORKER_GRAPHS: dict[str, PlacingGraph] = {}
+
+
+def places_in_worker(path: str, inputs: PartInputs) -> Places:
+    """The graph at ``path`` run on one part, its session made once per worker process."""
+    if path not in _WORKER_GRAPHS:
+        _WORKER_GRAPHS[path] = PlacingGraph(Path(path))
+    return _WORKER_GRAPHS[path].run(inputs)
+
+
+class CorrespondenceModel:
+    """The correspondence graph and the template it places parts on."""
+
+    def __init__(self, path: Path, regions: TemplateRegions, threads: int = 1) -> None:
+        self.path = path
+        self.graph = PlacingGraph(path, threads)
+        self.regions = regions
+        self.tell_below = self.graph.tell_below
+
+    def place(self, inputs: PartInputs) -> Placement:
+        """Each vertex of a part (its inputs from app.geometry.descriptors) on the template."""
+        return self.placement(inputs, self.graph.run(inputs))
+
+    def placement(self, inputs: PartInputs, places: Places) -> Placement:
+        """A part's places as the graph gave them, with each one's nearest template vertex."""
+        position = places.position.astype(np.float64)
         nearest = self.regions.nearest(position)
-        return Placement(position, confidence.astype(np.float64), nearest, inputs.mass.astype(np.float64))
+        return Placement(position, places.confidence.astype(np.float64), nearest, inputs.mass.astype(np.float64))
 
     def region(self, placement: Placement) -> np.ndarray:
         """(V,) bool: the template region the placed part covers."""
         return self.regions.covered(placement.vertex, placement.area)
 
-    def placed(self, inputs: PartInputs) -> PlacedPart:
-        placement = self.place(inputs)
+    def placed(self, inputs: PartInputs, places: Places | None = None) -> PlacedPart:
+        """The part placed (by ``places`` a worker computed, else here) and its region."""
+        placement = self.place(inputs) if places is None else self.placement(inputs, places)
         return PlacedPart(placement, self.region(placement))

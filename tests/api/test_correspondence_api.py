@@ -224,3 +224,23 @@ def test_an_upload_beside_a_spectrum_sent_with_its_region_is_placed_as_both_uplo
     assert mixed.json()["located_by"] == "correspondence" and mixed.json()["vertices"] == both["vertices"]
     assert mixed.json()["overlaps"] == pytest.approx(both["overlaps"])
     np.testing.assert_allclose(mixed.json()["eigenvalues"], both["eigenvalues"], rtol=1e-6)
+
+
+class _NoGraphHere:
+    """Stands in for the API process's own graph: placing there is what must not happen."""
+
+    def run(self, inputs):
+        raise AssertionError("the correspondence graph ran in the API process")
+
+
+def test_uploads_are_placed_in_the_solver_worker_not_the_api_process(client, samples, monkeypatch):
+    """The graph's memory and time fall under a solver worker's cap and deadline: with the API
+    process's own graph unusable, a part is still placed, and a union of two still measured."""
+    monkeypatch.setattr(client.app.state.resources.require_models().correspondence, "graph", _NoGraphHere())
+    name = "no_head_neck.ply"
+    placed = _correspond(client, name, samples[name])
+    assert placed.status_code == 200, placed.text
+    files = [("files", (n, samples[n])) for n in PARTS]
+    united = client.post("/v1/union", files=files)
+    assert united.status_code == 200, united.text
+    assert united.json()["overlaps_from"] == "correspondence"

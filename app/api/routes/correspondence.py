@@ -96,10 +96,10 @@ async def correspondence(
     data = await file.read()
     options = upload_options(settings, models.k, units, scale, closed=closed, boundary=boundary)
     solved: Solved = await request.app.state.solver.solve_with_functions(
-        data, resolved_type, options, vectors=False, descriptors=True
+        data, resolved_type, options, vectors=False, place_with=models.correspondence.path
     )
-    with INFERENCE.labels("correspondence").time():
-        placed = await anyio.to_thread.run_sync(models.correspondence.placed, solved.part)
+    INFERENCE.labels("correspondence").observe(solved.places.graph_ms / 1e3)
+    placed = await anyio.to_thread.run_sync(models.correspondence.placed, solved.part, solved.places)
     placement, region = placed.placement, placed.region
     if format == "npz":
         return Response(
