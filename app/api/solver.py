@@ -76,7 +76,6 @@ def _solve_task(
     options: SpectrumOptions,
     vectors: bool,
     footprint: bool,
-    descriptors: bool,
     place_with: str | None = None,
 ) -> Solved:
     """The worker's task: a solve, with a memory failure answered without its traceback.
@@ -91,10 +90,9 @@ def _solve_task(
     cap and deadline.
     """
     try:
-        solved = solve_bytes(data, file_type, options, vectors=vectors, footprint=footprint, descriptors=descriptors)
-        if place_with is None or solved.part is None:
-            return solved
-        return replace(solved, places=places_in_worker(place_with, solved.part))
+        placing = place_with is not None
+        solved = solve_bytes(data, file_type, options, vectors=vectors, footprint=footprint, descriptors=placing)
+        return replace(solved, places=places_in_worker(place_with, solved.part)) if placing else solved
     except MemoryError:
         pass
     gc.collect()
@@ -172,16 +170,14 @@ class SolverPool:
         *,
         vectors: bool = True,
         footprint: bool = False,
-        descriptors: bool = False,
         place_with: Path | None = None,
     ) -> Solved:
         """The solve with (``vectors``) its eigenfunctions and their vertices' provenance,
-        (``footprint``) where the shape lies (:mod:`app.geometry.overlap`) and (``descriptors``)
-        what the correspondence network reads of it (:mod:`app.geometry.descriptors`), and with
-        ``place_with`` (the graph's path) where that network places it."""
+        (``footprint``) where the shape lies (:mod:`app.geometry.overlap`) and, with ``place_with``
+        (the correspondence graph's path), what that network reads of it
+        (:mod:`app.geometry.descriptors`) and where it places it."""
         async with self.limiter:
-            place = str(place_with) if place_with is not None else None
-            task = (data, file_type, options, vectors, footprint, descriptors or place is not None, place)
+            task = (data, file_type, options, vectors, footprint, str(place_with) if place_with is not None else None)
             future = self._pool.schedule(_solve_task, args=task, timeout=self.timeout_s)
             try:
                 solved: Solved = await asyncio.wrap_future(future)
