@@ -23,7 +23,7 @@ from app.contract import CORRESPONDENCE_INPUTS
 from app.core.errors import InputError
 from app.geometry.descriptors import PartInputs, Places
 from app.geometry.laplacian import Operators
-from app.inference.template import RegionBoundaries, Template, edge_graph
+from app.inference.template import RegionBoundaries, Template
 
 # A part's region is where its area, carried to the template by its places, lies dense. Each
 # vertex's area lands on its place's nearest template vertex and spreads by one implicit heat
@@ -97,11 +97,11 @@ class PlacedPart:
 
 
 class TemplateRegions:
-    """The template's edge graph, areas and heat step: regions from placed parts, and their measures."""
+    """The template's areas, nearest-vertex tree and heat step: regions from placed parts, and
+    their measures."""
 
     def __init__(self, template: Template, operators: Operators) -> None:
         v, f = template.vertices, template.faces
-        self.graph = edge_graph(v, f)
         self.vertex_area = operators.mass.diagonal()
         self.tree = cKDTree(v)
         self.boundaries = RegionBoundaries(v, f)
