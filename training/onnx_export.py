@@ -15,7 +15,7 @@ import onnx
 import onnxruntime as ort
 import torch
 
-OPSET = 23  # ONNX's own Attention operator (union_net.EncoderLayer); Gelu one node since 20
+OPSET = 23  # ONNX's own Attention operator (corrections.EncoderLayer); Gelu one node since 20
 SOURCE_METADATA = "pkg.torch.onnx.stack_trace"  # per node: where in our Python it was traced
 
 

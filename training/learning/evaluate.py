@@ -38,8 +38,8 @@ from training.learning.masks import (
 )
 from training.learning.spectral_errors import spectral_errors
 from training.learning.train_localizer import probabilities
-from training.learning.train_union import predict
 from training.learning.union_net import UnionOperator
+from training.learning.union_predict import predict
 
 GROUPS = ("known_man", "unknown_man", "unknown_woman", "known_woman", "child")
 SPLITS = ("test_a", "test_b")

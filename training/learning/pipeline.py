@@ -27,8 +27,10 @@ from training.learning.localizer_net import Localizer, LocalizerConfig
 from training.learning.masks import SERVED_LOCALIZER
 from training.learning.shapedna import complete_shapes, full_coverage_pairs, retrieval_table, save_seed
 from training.learning.train_localizer import LocalizerTraining, train_localizer
-from training.learning.train_union import FLOOR_GRID, UnionTraining, predict, train_union
-from training.learning.union_net import PRIOR, UnionConfig
+from training.learning.train_union import UnionTraining, train_union
+from training.learning.union_config import PRIOR, UnionConfig
+from training.learning.union_predict import predict
+from training.learning.union_sigma import FLOOR_GRID
 
 
 @dataclass(frozen=True)

@@ -20,8 +20,8 @@ from training.learning.data import PairTable, SpectralData
 from training.learning.fit import LoopSettings, Objective, fit, pick_device, seed_everything
 from training.learning.localizer_net import Localizer, LocalizerConfig, feature_statistics
 from training.learning.masks import symmetric_scores
-from training.learning.train_union import memory_rows, predict
 from training.learning.union_net import UnionOperator
+from training.learning.union_predict import memory_rows, predict
 
 
 @dataclass(frozen=True)

@@ -10,40 +10,30 @@ batch of chains whose inner union is the operator's *own prediction*, so errors 
 to grow along a chain. Inputs get a small multiplicative jitter (the spectrum of a fixed region
 moves ~1 % across poses). The best epoch by a validation metric (``selection``) is kept; then,
 on the validation rows, the blend of the network's decrease with the neighbours' is fitted
-(:func:`fit_blend`) and σ calibrated.
+(:mod:`union_blend`) and σ calibrated (:mod:`union_sigma`).
 """
 
-from collections.abc import Iterator
-from dataclasses import asdict, dataclass, fields, replace
-from itertools import product
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
 import torch
 from scipy import sparse
-from scipy.optimize import minimize
-from scipy.special import expit
 
-from app.contract import INTERVAL_Z, UNKNOWN_OVERLAP
+from app.contract import UNKNOWN_OVERLAP
 from training.data.pairs import FULL_COVERAGE
 from training.data.spectra import REMESHED
 from training.data.splits import TEST_B_MAX_IOU
+from training.learning.corrections import ToldCorrection
 from training.learning.data import PairTable, SpectralData
 from training.learning.fit import LoopSettings, Objective, fit, pick_device, seed_everything
 from training.learning.spectral_errors import spectral_errors
-from training.learning.union_net import (
-    EPSILON,
-    MONOTONE,
-    SIGMA_FLOOR,
-    UNFITTED_BLEND,
-    ToldCorrection,
-    UnionConfig,
-    UnionMemory,
-    UnionOperator,
-    common_scale,
-    disjoint_union,
-    relative_log,
-)
+from training.learning.union_blend import fit_blend_on
+from training.learning.union_config import UnionConfig
+from training.learning.union_memory import common_scale, disjoint_union, relative_log
+from training.learning.union_net import SIGMA_FLOOR, UnionOperator
+from training.learning.union_predict import build_operator, memory_rows, predict, same_body, tensor
+from training.learning.union_sigma import calibrate, calibrate_told
 
 
 @dataclass(frozen=True)
@@ -79,23 +69,9 @@ class UnionTraining(LoopSettings):
     boundary_noise: float = 0.04
 
 
-def _tensor(array: np.ndarray, device: torch.device) -> torch.Tensor:
-    return torch.as_tensor(array, dtype=torch.float32, device=device)
-
-
 def _jitter(x: torch.Tensor, amount: float, generator: torch.Generator) -> torch.Tensor:
     noise = torch.randn(x.shape, generator=generator).to(x.device)
     return x * (1 + amount * noise)
-
-
-def memory_rows(data: SpectralData) -> np.ndarray:
-    """The pair rows the operator's memory holds, in memory order: the training split."""
-    return np.flatnonzero(data.pairs.split == "train")
-
-
-def same_body(memory_bodies: torch.Tensor, bodies: torch.Tensor) -> torch.Tensor:
-    """(B, rows) which memory rows are cut from each query's body (shape A's index)."""
-    return memory_bodies[None, :] == bodies[:, None]
 
 
 # union_kin: template vertices sampled (fixed seed) to compare union regions by; queries per product.
@@ -152,7 +128,7 @@ def size_weights(data: SpectralData, rows: np.ndarray) -> np.ndarray:
 
     Why: the random draws make most partial unions large (median 84 % of the body) and leave
     mid-sized ones split along a thin band, where two parts add nearly all of each other, to
-    ~4 % of the rows (`benchmarks/union_sizes.py`); scans come in every size.
+    ~4 % of the rows (docs/decisions/010); scans come in every size.
     """
     pairs = data.pairs
     share = data.coverage(pairs.mask_union[rows])
@@ -195,280 +171,6 @@ def _losses(
     return total
 
 
-@torch.no_grad()
-def _batches(
-    model: UnionOperator,
-    a: np.ndarray,
-    b: np.ndarray,
-    bodies: tuple[np.ndarray, np.ndarray] | None,
-    batch: int,
-    overlap: np.ndarray | None = None,
-    boundary: np.ndarray | None = None,
-) -> Iterator[tuple[torch.Tensor, torch.Tensor, torch.Tensor | None, torch.Tensor | None, torch.Tensor | None]]:
-    """(a, b, the memory rows hidden from each query, the overlaps told, the boundary shares told)
-    of each batch, as tensors on the model's device."""
-    device = next(model.parameters()).device
-    memory_bodies = None if bodies is None else torch.as_tensor(bodies[0], device=device)
-    for start in range(0, len(a), batch):
-        window = slice(start, start + batch)
-        hidden = None
-        if memory_bodies is not None:
-            hidden = same_body(memory_bodies, torch.as_tensor(bodies[1][window], device=device))
-        told, edge = (None if x is None else _tensor(x[window], device).reshape(-1, 1) for x in (overlap, boundary))
-        yield _tensor(a[window], device), _tensor(b[window], device), hidden, told, edge
-
-
-@torch.no_grad()
-def predict(
-    model: UnionOperator,
-    a: np.ndarray,
-    b: np.ndarray,
-    bodies: tuple[np.ndarray, np.ndarray] | None = None,
-    batch: int = 1024,
-    overlap: np.ndarray | None = None,
-    boundary: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """(union, σ) for numpy operands, in eval mode, on the model's device.
-
-    ``bodies`` (the memory rows' bodies, the queries' bodies) hides from each query the memory
-    rows cut from its body: predictions of training or validation pairs are then those of a new
-    body, like the test pairs'. ``overlap`` (n,): what each pair is told of its overlap
-    (UnionConfig.overlap_hint; negative: unknown; None: unknown for all); ``boundary`` (n,) the
-    boundary shares told besides it (UnionConfig.told_boundary; negative or None: unknown).
-    """
-    model.eval()
-    means, sigmas = [], []
-    for a_t, b_t, hidden, told, edge in _batches(model, a, b, bodies, batch, overlap, boundary):
-        mean, sigma = model(a_t, b_t, hidden, told, edge)
-        means.append(mean.cpu().numpy())
-        sigmas.append(sigma.cpu().numpy())
-    return np.concatenate(means), np.concatenate(sigmas)
-
-
-# The blend's search (fit_blend): Nelder–Mead from w ≈ 0.27 for every pair, a simplex of edge 2;
-# with chains, refitted this many times, each time with the inner unions the last fit makes.
-BLEND_START = (-1.0, 0.0, 0.0, 0.0, 0.0)
-BLEND_STEP = 2.0
-BLEND_CHAIN_ROUNDS = 2
-
-
-@dataclass(frozen=True)
-class BlendRows:
-    """What the blend's fit needs of a set of pairs: the minimum and the network's decrease in z,
-    the neighbours' median decrease and the weight's features (UnionOperator.blend_terms), the
-    common scale, and the true unions."""
-
-    floor: np.ndarray
-    decrease: np.ndarray
-    median: np.ndarray
-    features: np.ndarray
-    scale: np.ndarray
-    union: np.ndarray
-
-    @classmethod
-    @torch.no_grad()
-    def of(
-        cls,
-        model: UnionOperator,
-        a: np.ndarray,
-        b: np.ndarray,
-        union: np.ndarray,
-        bodies: tuple[np.ndarray, np.ndarray],
-        batch: int = 1024,
-    ) -> "BlendRows":
-        columns: list[list[np.ndarray]] = [[] for _ in range(5)]
-        for a_t, b_t, hidden, _, _ in _batches(model, a, b, bodies, batch):
-            parts = model.proposal(a_t, b_t, hidden)
-            median, features = model.blend_terms(parts)
-            values = (parts.floor, parts.decrease, median, features, parts.scale)
-            for column, value in zip(columns, values, strict=True):
-                column.append(value.double().cpu().numpy())
-        return cls(*(np.concatenate(column) for column in columns), union=union)
-
-    def __add__(self, other: "BlendRows") -> "BlendRows":
-        return BlendRows(*(np.concatenate([getattr(self, f.name), getattr(other, f.name)]) for f in fields(self)))
-
-    def error(self, weights: np.ndarray) -> float:
-        """Mean relative error of the unions the blend with these weights makes (as the graph does)."""
-        weight = expit(self.features @ weights)[:, None]
-        z = self.floor - ((1 - weight) * self.decrease + weight * self.median)
-        blended = np.sort(np.maximum(np.exp(z) - EPSILON, 0.0), axis=1) * self.scale
-        return spectral_errors(blended, self.union)["mre"]
-
-
-def training_chains(data: SpectralData) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
-    """The training chains as :func:`fit_blend` reads them: (A, B, C, A ∪ B ∪ C), their bodies."""
-    rows = ~data.triples.test
-    a, b, c, _, abc = (s[rows] for s in data.triples.spectra)
-    return (a, b, c, abc), data.triples.shape[rows]
-
-
-def fit_blend_on(model: UnionOperator, data: SpectralData) -> np.ndarray:
-    """:func:`fit_blend` on what a run of ``data`` fits it to: its validation pairs and its training
-    chains, leave-one-body-out against the memory's rows."""
-    pairs = data.pairs
-    validation = pairs.rows(np.flatnonzero(pairs.split == "validation"))
-    bodies = (pairs.shape_a[memory_rows(data)], validation.shape_a)
-    return fit_blend(model, validation.a, validation.b, validation.union, bodies, training_chains(data))
-
-
-def _searched(rows: BlendRows, start: np.ndarray) -> np.ndarray:
-    simplex = np.vstack([start, start + BLEND_STEP * np.eye(len(start))])
-    options = {"initial_simplex": simplex, "maxiter": 3000, "xatol": 1e-3, "fatol": 1e-7}
-    return minimize(rows.error, start, method="Nelder-Mead", options=options).x
-
-
-def fit_blend(
-    model: UnionOperator,
-    a: np.ndarray,
-    b: np.ndarray,
-    union: np.ndarray,
-    bodies: tuple[np.ndarray, np.ndarray],
-    chains: tuple[tuple[np.ndarray, ...], np.ndarray] | None = None,
-) -> np.ndarray:
-    """Fit the weights of the blend of the network's decrease with the neighbours' median
-    (``UnionOperator.blended``) to the mean relative error of the validation pairs, predicted
-    leave-one-body-out, and set them. Five numbers on ~1 500 pairs, like σ's calibration.
-
-    ``chains`` ((A, B, C, A ∪ B ∪ C) spectra, their bodies) adds the second step of chains
-    (A ∪ B) ∪ C, leave-one-body-out, whose inner union is the blended operator's own (refitted
-    :data:`BLEND_CHAIN_ROUNDS` times, each with the inner unions of the last fit): the service
-    chains the operator, and a blend fitted on single pairs alone lost 0.6 points on the test
-    chains. The weights are kept only if they beat the network alone on the rows fitted (else
-    the blend stays unfitted: w = 0). Returns the weights set (the unfitted ones for the PRIOR
-    parametrization, which has no decrease).
-    """
-    model.eval()
-    model.set_blend_weights(UNFITTED_BLEND)
-    unfitted = np.asarray(UNFITTED_BLEND)
-    if model.config.parametrization != MONOTONE:
-        return unfitted
-    pairs = BlendRows.of(model, a, b, union, bodies)
-    if chains is not None and not len(chains[1]):
-        chains = None
-
-    def with_chains(weights: np.ndarray) -> BlendRows:
-        if chains is None:
-            return pairs
-        (first, second, third, truth), shapes = chains
-        model.set_blend_weights(weights)
-        chain_bodies = (bodies[0], shapes)
-        inner = predict(model, first, second, chain_bodies)[0]
-        return pairs + BlendRows.of(model, inner, third, truth, chain_bodies)
-
-    weights = _searched(pairs, np.asarray(BLEND_START))
-    for _ in range(BLEND_CHAIN_ROUNDS if chains is not None else 0):
-        weights = _searched(with_chains(weights), weights)
-    if with_chains(weights).error(weights) >= with_chains(unfitted).error(unfitted):
-        weights = unfitted
-    model.set_blend_weights(weights)
-    return weights
-
-
-DECREASE_WEIGHTS = (0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)  # σ's decrease term, relative to the spread's
-DISAGREEMENT_WEIGHTS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)  # σ's disagreement term, relative to the spread's
-# σ's term in how far apart the network's and the neighbours' decreases are, relative to the spread's:
-# on the served run it outweighs the spread (256 was kept; a grid up to 16 384 kept it too).
-SPLIT_WEIGHTS = (0.0, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0)
-FLOOR_GRID = (0.01, 0.02, 0.03, 0.05, 0.08)  # σ's floor (a share of the union), when calibrated (0.01: fixed)
-CALIBRATION_BINS = 5
-COINCIDENT = 0.5  # a validation pair whose coincidence gate is below this is taken for one region twice
-IDENTICAL_BIN, REMESHED_BIN, TWICE_BIN = -1, 0, 1  # then the quintiles of the decrease
-
-
-@torch.no_grad()
-def coincidence(model: UnionOperator, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(n,) the operator's coincidence gate of each pair (1 when it has none)."""
-    device = next(model.parameters()).device
-    a_t, b_t = _tensor(a, device), _tensor(b, device)
-    scale = common_scale(a_t, b_t)
-    return model.coincidence(relative_log(a_t, scale), relative_log(b_t, scale))[:, 0].cpu().numpy()
-
-
-def calibration_bins(
-    model: UnionOperator, a: np.ndarray, b: np.ndarray, added: np.ndarray, remeshed: np.ndarray
-) -> np.ndarray:
-    """(n,) the bin each validation pair's coverage is checked in.
-
-    Pairs whose parts are in another meshing than their union (``remeshed``) in
-    :data:`REMESHED_BIN`, one spectrum twice among them: its union differs from it by the
-    meshing alone. Of the rest, one spectrum twice is exact and in no bin
-    (:data:`IDENTICAL_BIN`); pairs taken for one region scanned twice in :data:`TWICE_BIN` when
-    there are enough of them; every other pair by quintiles of how much the operator says the
-    parts add. A bin with too few pairs to judge a 90 % coverage by is merged into the quintiles.
-    """
-    gate = coincidence(model, a, b)
-    identical = (a == b).all(1) & ~remeshed
-    if remeshed.sum() < 2 * CALIBRATION_BINS:
-        remeshed = np.zeros_like(remeshed)
-    twice = (gate < COINCIDENT) & ~identical & ~remeshed
-    if twice.sum() < 2 * CALIBRATION_BINS:
-        twice[:] = False
-    apart = ~twice & ~identical & ~remeshed
-    edges = np.quantile(added[apart], np.linspace(0, 1, CALIBRATION_BINS + 1)[1:-1]) if apart.any() else []
-    bins = TWICE_BIN + 1 + np.searchsorted(edges, added)
-    return np.select([identical, remeshed, twice], [IDENTICAL_BIN, REMESHED_BIN, TWICE_BIN], default=bins)
-
-
-def calibrate(
-    model: UnionOperator,
-    a: np.ndarray,
-    b: np.ndarray,
-    union: np.ndarray,
-    remeshed: np.ndarray,
-    bodies: tuple[np.ndarray, np.ndarray],
-    floors: tuple[float, ...] = (SIGMA_FLOOR,),
-) -> tuple[float, ...]:
-    """Fit σ's five weights so that μ ± z·σ holds 90 % of the validation eigenvalues, and as
-    evenly as it can across the bins of :func:`calibration_bins`: re-meshed pairs, pairs taken
-    for one region scanned twice, pairs that add little and pairs that add much.
-
-    The floor is absolute (a share of the union, of ``floors``): it stands for what meshing
-    alone moves a spectrum by, which validation pairs, in the training meshing, cannot show
-    unless re-meshed ones are among them (then ``floors`` is a grid to choose from). For each
-    floor and each relative weight of the decrease, disagreement and split terms (the spread's
-    being 1), the common factor of those terms is the one that covers 90 % overall; the weights
-    kept are those whose worst coverage over the bins is nearest 90 %. Scaling the floor with
-    the other terms let it shrink with the spread's share once the split term came (to 2 % of
-    its value) and halved the coverage of re-meshed re-scans on the tests. ``remeshed`` flags
-    the pairs whose parts are in another meshing than their union. Returns the (spread, floor,
-    decrease, disagreement, split) weights.
-    """
-    parts = []
-    for weights in np.eye(5):
-        model.set_sigma_weights(*weights)
-        mean, sigma = predict(model, a, b, bodies)
-        parts.append(sigma)
-    error = np.abs(mean - union)
-    added = parts[2].mean(1) / np.maximum(np.abs(mean).mean(1), 1e-12)
-    bins = calibration_bins(model, a, b, added, remeshed)
-    checked = np.unique(bins[bins != IDENTICAL_BIN])
-    monotone = model.config.parametrization == MONOTONE
-    grid = product(
-        floors,
-        DECREASE_WEIGHTS if monotone else (0.0,),
-        DISAGREEMENT_WEIGHTS if model.gated else (0.0,),
-        SPLIT_WEIGHTS if monotone else (0.0,),
-    )
-    best = (np.inf, 1.0, SIGMA_FLOOR, 0.0, 0.0, 0.0)
-    for floor, *relative in grid:
-        terms = np.maximum(parts[0] + sum(w * part for w, part in zip(relative, parts[2:], strict=True)), 1e-12)
-        # The smallest factor that covers each eigenvalue, over the floor's share: its 90 % quantile.
-        needed = np.maximum(error / INTERVAL_Z - floor * parts[1], 0.0) / terms
-        factor = float(np.quantile(needed, 0.9))
-        covered = error <= INTERVAL_Z * (floor * parts[1] + factor * terms)
-        worst = max(abs(covered[bins == i].mean() - 0.9) for i in checked)
-        if worst < best[0]:
-            best = (worst, factor, floor, *(factor * w for w in relative))
-    model.set_sigma_weights(*best[1:])
-    return best[1:]
-
-
-def build_operator(train: PairTable, config: UnionConfig) -> UnionOperator:
-    """An untrained operator whose memory holds these training pairs."""
-    return UnionOperator(config, UnionMemory(train.a, train.b, train.union))
-
-
 def train_union(
     data: SpectralData,
     checkpoint: Path,
@@ -486,14 +188,14 @@ def train_union(
     validation = pairs.rows(np.flatnonzero(pairs.split == "validation"))
     model = build_operator(train, config).to(device)
     run_config = {"model": config.as_dict(), "training": asdict(settings)}
-    train_tensors = [_tensor(x, device) for x in (train.a, train.b, train.union)]
+    train_tensors = [tensor(x, device) for x in (train.a, train.b, train.union)]
     memory_bodies = torch.as_tensor(train.shape_a, device=device)
     bodies = (train.shape_a, validation.shape_a)
     chain_rows = np.flatnonzero(~data.triples.test)
-    chain_tensors = [_tensor(s[chain_rows], device) for s in data.triples.spectra]
+    chain_tensors = [tensor(s[chain_rows], device) for s in data.triples.spectra]
     kin = union_kin(data, memory, memory) if settings.hide_union_type > 0 else None
     drawn = torch.as_tensor(size_weights(data, memory)) if settings.balance_union_sizes else None
-    shares = _tensor(data.overlap_shares(train.mask_a, train.mask_b), device) if config.overlap_hint else None
+    shares = tensor(data.overlap_shares(train.mask_a, train.mask_b), device) if config.overlap_hint else None
 
     def batch_loss(rows: torch.Tensor) -> torch.Tensor:
         if drawn is not None:  # the loop's rows replaced by as many drawn by union size
@@ -555,15 +257,15 @@ def train_told(
     """
     generator = torch.Generator().manual_seed(settings.seed)
     torch.manual_seed(settings.seed)
-    a, b, union = (_tensor(x, torch.device("cpu")) for x in (train.a, train.b, train.union))
+    a, b, union = (tensor(x, torch.device("cpu")) for x in (train.a, train.b, train.union))
     with torch.no_grad():
         scale = common_scale(a, b)
         za, zb = relative_log(a, scale), relative_log(b, scale)
         disjoint = relative_log(disjoint_union(a, b), scale)
         gate = model.cpu().coincidence(za, zb)
         floor, target = torch.minimum(za, zb), relative_log(union, scale)
-    share = _tensor(shares, torch.device("cpu"))[:, None]
-    edge = None if boundaries is None else _tensor(boundaries, torch.device("cpu"))[:, None]
+    share = tensor(shares, torch.device("cpu"))[:, None]
+    edge = None if boundaries is None else tensor(boundaries, torch.device("cpu"))[:, None]
     specialist = ToldCorrection(za.shape[1], model.config.told_width, boundary=edge is not None)
     specialist.set_standardization(ToldCorrection.inputs(za, zb, disjoint, specialist.told(share, edge)))
     optimizer = torch.optim.Adam(specialist.parameters(), lr=settings.told_learning_rate)
@@ -608,35 +310,6 @@ def _told(shares: torch.Tensor, settings: UnionTraining, generator: torch.Genera
     told = torch.rand(shares.shape, generator=generator).to(shares.device) < settings.overlap_told
     measured = torch.clamp(shares + noise, 0.0, 1.0)
     return torch.where(told, measured, torch.full_like(shares, UNKNOWN_OVERLAP))[:, None]
-
-
-def calibrate_told(
-    model: UnionOperator,
-    a: np.ndarray,
-    b: np.ndarray,
-    union: np.ndarray,
-    overlap: np.ndarray,
-    bodies: tuple[np.ndarray, np.ndarray],
-    boundary: np.ndarray | None = None,
-) -> float:
-    """Fit σ's factor for pairs told their overlap (``sigma_told``, on every term of σ but the
-    floor): the one that makes μ ± z·σ hold 90 % of the validation eigenvalues when each pair is
-    told its true overlap. The other weights stay as :func:`calibrate` fitted them without it;
-    told the overlap, the operator errs less and its σ, unscaled, would cover nearly every
-    eigenvalue. Scaling the floor too (one factor on all of σ, 0.71) left re-meshed re-scans of
-    one region covered 24 % of the time on Test C instead of 59 % untold. With ``boundary``, the
-    factor of pairs told their boundary share too (``sigma_boundary``), who err less again: the
-    share's factor left Test B told both covered 92–93 %. Returns the factor."""
-    set_factor = model.set_sigma_told if boundary is None else model.set_sigma_boundary
-    set_factor(0.0)  # σ is the floor alone
-    mean, floor_only = predict(model, a, b, bodies, overlap=overlap, boundary=boundary)
-    set_factor(1.0)
-    _, sigma = predict(model, a, b, bodies, overlap=overlap, boundary=boundary)
-    terms = np.maximum(sigma - floor_only, 1e-12)
-    needed = np.maximum(np.abs(mean - union) / INTERVAL_Z - floor_only, 0.0) / terms
-    factor = float(np.quantile(needed, 0.9))
-    set_factor(factor)
-    return factor
 
 
 def load_operator(data: SpectralData, checkpoint: Path) -> UnionOperator:

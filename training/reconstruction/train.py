@@ -3,7 +3,7 @@
 Rows are (spectrum, identity): every posed complete spectrum of the bodies build, and the
 operator's predicted unions of the benchmark's full-coverage training pairs, predicted
 leave-one-body-out as a new person's would be, so the decoder meets the union's error in
-training (the issue's "(b)"), and the true spectra of training unions that cover half the body
+training, and the true spectra of training unions that cover half the body
 or more but not all of it, so that a scanning session's union before it closes is answered
 with the person's body rather than an extrapolation from complete ones; a second network learns
 the measured spectra alone (the decoder's docstring says why). The union network also learns
@@ -23,8 +23,9 @@ import torch
 from training.data.spectra import MESH
 from training.learning.data import SpectralData
 from training.learning.fit import LoopSettings, Objective, fit, seed_everything
-from training.learning.train_union import load_operator, memory_rows, predict
+from training.learning.train_union import load_operator
 from training.learning.union_net import UnionOperator
+from training.learning.union_predict import memory_rows, predict
 from training.reconstruction.bodies import BODIES_FILE
 from training.reconstruction.decoder import (
     DecoderConfig,

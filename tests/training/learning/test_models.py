@@ -6,18 +6,11 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from training.learning.corrections import ToldCorrection  # noqa: E402
 from training.learning.localizer_net import Localizer, LocalizerConfig, feature_statistics  # noqa: E402
-from training.learning.union_net import (  # noqa: E402
-    EPSILON,
-    MONOTONE,
-    PRIOR,
-    ToldCorrection,
-    UnionConfig,
-    UnionMemory,
-    UnionOperator,
-    common_scale,
-    relative_log,
-)
+from training.learning.union_config import MONOTONE, PRIOR, UnionConfig  # noqa: E402
+from training.learning.union_memory import EPSILON, UnionMemory, common_scale, relative_log  # noqa: E402
+from training.learning.union_net import UnionOperator  # noqa: E402
 
 
 def spectra(count: int, seed: int) -> torch.Tensor:
@@ -321,7 +314,7 @@ def test_a_told_boundary_share_reaches_the_pairs_told_their_overlap_and_only_the
 
 
 def test_sigma_of_a_pair_told_its_overlap_takes_the_told_factor_above_its_floor():
-    """σ's factor for told pairs (fitted by train_union.calibrate_told) scales σ above its floor
+    """σ's factor for told pairs (fitted by union_sigma.calibrate_told) scales σ above its floor
     where the overlap is told, and there only; the floor (what meshing alone moves a spectrum by)
     stays whole."""
     model = operator("transformer", reads="told")
@@ -343,7 +336,7 @@ def test_sigma_of_a_pair_told_its_overlap_takes_the_told_factor_above_its_floor(
 
 def test_sigma_of_a_pair_told_its_boundary_share_takes_its_own_factor():
     """σ's factor for pairs told their boundary share too (``sigma_boundary``, fitted by
-    train_union.calibrate_told with boundaries) scales σ above its floor there and only there:
+    union_sigma.calibrate_told with boundaries) scales σ above its floor there and only there:
     pairs told the share alone keep the share's factor, untold pairs none."""
     model = operator("transformer", reads="told_boundary")
     a, b = spectra(16, 16), spectra(16, 17)
@@ -378,7 +371,7 @@ def test_calibration_covers_ninety_percent_and_bins_pairs_by_what_makes_them_unc
     is in no bin (it is exact) unless its parts are re-meshed (then its union differs by the
     meshing), re-meshed pairs have their own bin, a re-scan 1 % apart is in the one-region bin,
     different parts in the others."""
-    from training.learning.train_union import (
+    from training.learning.union_sigma import (
         FLOOR_GRID,
         IDENTICAL_BIN,
         REMESHED_BIN,
@@ -419,7 +412,7 @@ def test_the_blend_fitted_on_validation_pairs_finds_which_decrease_their_unions_
     blend (near) off; made by the neighbours' median decrease, the fitted blend follows it
     (w → 1): in both cases the fitted operator reproduces them far better than the other answer."""
     from training.learning.spectral_errors import spectral_errors
-    from training.learning.train_union import fit_blend
+    from training.learning.union_blend import fit_blend
     from training.learning.union_net import UNFITTED_BLEND
 
     model = operator("deepsets")

@@ -23,7 +23,8 @@ from training.learning import train_union as union_training  # noqa: E402
 from training.learning.data import SpectralData  # noqa: E402
 from training.learning.export import session  # noqa: E402
 from training.learning.pipeline import TRAINING_PRESETS, run_pipeline  # noqa: E402
-from training.learning.train_union import SIZE_BINS, memory_rows, size_weights, train_union, union_kin  # noqa: E402
+from training.learning.train_union import SIZE_BINS, size_weights, train_union, union_kin  # noqa: E402
+from training.learning.union_predict import memory_rows  # noqa: E402
 from training.reconstruction.train import partial_rows  # noqa: E402
 
 
