@@ -17,6 +17,7 @@ from app.inference.manifest import write_manifest
 from training.correspondence.evaluate import evaluate_correspondence, evaluate_pairs
 from training.correspondence.export import correspondence_parity, export_correspondence
 from training.correspondence.train import TRAINING_PRESETS, load_parts, restored, train
+from training.glance import update_glance
 from training.learning.card import replace_block
 
 METRICS_FILE = "correspondence.json"
@@ -53,6 +54,7 @@ def run_correspondence_pipeline(
     }
     (models / METRICS_FILE).write_text(json.dumps(metrics, indent=1))
     replace_block(models / "MODEL_CARD.md", BEGIN, END, render(metrics, command))
+    update_glance(models)
     return metrics
 
 

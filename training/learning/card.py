@@ -1,6 +1,7 @@
-"""Render metrics.json as the tables of ``models/MODEL_CARD.md``.
+"""Render metrics.json as tables: every table in ``EVALUATION.md`` beside the models, and their
+summary in ``MODEL_CARD.md``.
 
-The card's prose is written by hand; the generated tables live between two markers so that
+The card's prose is written by hand; its generated tables live between two markers so that
 re-running the evaluation refreshes the figures without touching the text around them.
 """
 
@@ -11,6 +12,7 @@ import numpy as np
 from training.learning.masks import UNION_WITH_PARTS
 
 BEGIN, END = "<!-- metrics:begin -->", "<!-- metrics:end -->"
+CARD, EVALUATION = "MODEL_CARD.md", "EVALUATION.md"
 PAPER_ROWS = [
     f"{split}/{group}/{variant}"
     for split in ("test_a", "test_b")
@@ -176,75 +178,6 @@ def told_table(metrics: dict) -> list[str]:
     return lines
 
 
-def _strata_rows(metrics: dict, split: str, strata: tuple[str, ...]) -> list[dict]:
-    return [
-        row
-        for key, row in metrics.get("strata", {}).items()
-        if key.startswith(f"{split}/") and key.split("/")[1] in strata
-    ]
-
-
-def _pooled(rows: list[dict], method: str) -> float:
-    """Mean relative error of ``method`` over rows, weighted by their sizes."""
-    return float(np.average([r["union"][method]["mre"] for r in rows], weights=[r["rows"] for r in rows]))
-
-
-def goals_table(metrics: dict) -> list[str]:
-    """Issue 16's goals, each against its measured figure: met or not, never hidden."""
-    lines = ["| goal | measured | met |", "|---|---|---|"]
-
-    def add(goal: str, measured: str, met: bool) -> None:
-        lines.append(f"| {goal} | {measured} | {'yes' if met else '**no**'} |")
-
-    identical = _strata_rows(metrics, "test_c", ("identical",))
-    if identical:
-        worst = max(r["union"]["operator"]["mre"] for r in identical)
-        add("U(A, A) within 0.5 % of A (Test C identical)", percent(worst), worst <= 0.005)
-    same = _strata_rows(metrics, "test_c", ("same_region",))
-    if same:
-        value = _pooled(same, "operator")
-        add("U(A, A′) mre ≤ 2 % (Test C same region, other pose or meshing)", percent(value), value <= 0.02)
-    nested = _strata_rows(metrics, "test_c", ("nested",))
-    if nested:
-        ours, floor = _pooled(nested, "operator"), _pooled(nested, "elementwise_min")
-        add("nested: no worse than the elementwise minimum", f"{percent(ours)} vs {percent(floor)}", ours <= floor)
-    others = [
-        (key, row)
-        for key, row in metrics.get("strata", {}).items()
-        if key.startswith("test_c/") and key.split("/")[1] in ("over_75", "25_to_75", "under_25")
-    ]
-    others += [(key, row) for key, row in metrics["rows"].items() if key.startswith("test_b/")]
-    told = metrics.get("overlap_told", {})
-    for key, row in others:
-        best = min(row["union"][b]["mre"] for b in BASELINES)
-        answers = [("", row["union"]["operator"]["mre"])]
-        if key in told:  # the same rows, the operator told each pair's overlap (and boundary share)
-            answers.append((", told the overlap", told[key]["union"]["told"]["mre"]))
-            if "told_boundary" in told[key]["union"]:
-                answers.append((", told the overlap and boundary share", told[key]["union"]["told_boundary"]["mre"]))
-        for told_note, ours in answers:
-            add(
-                f"{key}{told_note}: mre ≤ 10 % and ≥ 1.5× better than the best baseline",
-                f"{percent(ours)}, {best / ours:.2f}×",
-                ours <= 0.10 and best >= 1.5 * ours,
-            )
-    coverage = [
-        (key, row["interval_coverage"])
-        for table in ("strata", "rows")
-        for key, row in metrics.get(table, {}).items()
-        if key.startswith("test_c/" if table == "strata" else "test_b/")
-    ]
-    inside = [key for key, value in coverage if 0.87 <= value <= 0.93]
-    if coverage:
-        low, high = min(v for _, v in coverage), max(v for _, v in coverage)
-        add(
-            "90 % interval covers 87–93 % in every Test C stratum and Test B row",
-            f"{len(inside)} of {len(coverage)} rows inside; range {percent(low)}–{percent(high)}",
-            len(inside) == len(coverage),
-        )
-    return lines
-
-
 def session_table(metrics: dict) -> list[str]:
     """Test C by kind of session pair, then its chains of consecutive views."""
     methods = ("operator", *BASELINES)
@@ -256,7 +189,7 @@ def session_table(metrics: dict) -> list[str]:
     ]
     for kind, row in metrics.get("test_c_kinds", {}).items():
         cells = " | ".join(percent(row["union"][m]["mre"]) for m in methods)
-        lines.append(f"| {kind} | {row['rows']} | {cells} | — | (by stratum above) |")
+        lines.append(f"| {kind} | {row['rows']} | {cells} | — | (by overlap stratum) |")
     chains = metrics.get("test_c_chains", {})
     for length, row in chains.items():
         if length == "associativity":
@@ -287,30 +220,37 @@ def retrieval_table(metrics: dict) -> list[str]:
 
 
 def render(metrics: dict, command: str) -> str:
+    """Every table of the evaluation, for ``EVALUATION.md`` beside the models."""
     validation = metrics["union_validation"]
     lines = [
-        BEGIN,
-        f"Produced by `{command}`.",
+        "# Evaluation of the union operator and the localizers",
         "",
-        "### Union spectrum (Table 1)",
-        "mse/mae in (1/m²)², 1/m²; mre = mean relative error per eigenvalue. Baselines on the same rows.",
+        f"Generated from `metrics.json` by `{command}`; the model card summarizes it. Rows are",
+        "`split/group/variant`: Test A (poses or regions unseen; the union type may be seen), Test B (a union",
+        "whose symmetric IoU with every training union is below 0.8), Test C (scanning sessions of people never",
+        "trained on); `mesh` the extracted submesh, `remeshed` 30 % of its vertices collapsed, `cloud` points",
+        "with flagged boundaries. Baselines on the same rows: the elementwise minimum, the disjoint union (the k",
+        "smallest of both spectra), the larger part, and the nearest training pair's union (lookup). mre: mean",
+        "relative error per eigenvalue (a closed union's λ₁ = 0 left out).",
+        "",
+        "## Union spectrum (the paper's Table 1)",
+        "mse/mae in (1/m²)², 1/m².",
         "",
         *union_table(metrics),
         "",
-        "Mean relative error by eigenvalue, pooled over the 6 paper rows of each split (a closed union's",
-        "λ₁ = 0 left out):",
+        "Mean relative error by eigenvalue, pooled over the 6 paper rows of each split:",
         "",
         *per_eigenvalue_table(metrics),
         "",
-        "### Localization (Tables 2 and 3): symmetric, area-weighted",
+        "## Localization (the paper's Tables 2 and 3): symmetric, area-weighted",
         "Each column a localizer on the predicted union at p ≥ 0.5 (`all` is the served one), but `parts_united`:",
         f"the served localizer on each part, the two regions united; and `{UNION_WITH_PARTS}`, what `/v1/localize`",
-        "answers: each region the most probable vertices up to the area the served localizer expects, the",
-        "union's grown to hold each part's own (turned to its side).",
+        "answers for spectra: each region the most probable vertices up to the area the served localizer",
+        "expects, the union's grown to hold each part's own (turned to its side).",
         "",
         *localization_table(metrics),
         "",
-        "### Overlap strata (Test C: scanning sessions on identities never trained on; Test A: overlapping pairs)",
+        "## Overlap strata",
         "Stratum: share of the smaller part inside the other. identical = one spectrum twice; same_region = the",
         "region again in another pose or meshing; nested ≥ 98 %. above min: share of eigenvalues above",
         "min(λ(A), λ(B)), which a union cannot be.",
@@ -320,23 +260,106 @@ def render(metrics: dict, command: str) -> str:
         *session_table(metrics),
         "",
         *_told_section(metrics),
-        "Goals of issue 16, each against its figure (the Test A and chain goal — no row more than 0.5 points",
-        "worse than the previous card — is in the before/after table of the card's prose):",
-        "",
-        *goals_table(metrics),
-        "",
-        "### Chains and the noise floor",
+        "## Chains and the noise floor",
         "",
         *extra_table(metrics),
         "",
         f"Union operator, validation {validation['metric']} per epoch (the lowest is kept): "
         + ", ".join(f"{m:.4g}" for m in validation["per_epoch"]),
         "",
-        "### Identity retrieval (Table 4)",
-        "Queries: the full-coverage test pairs (every group and variant); database: every complete posed body",
-        "of the benchmark except the query's own shape (ShapeDNA: each complete shape against the others).",
-        "`operator_union_share_profile`: the same unions untold, each stored shape at its distance to the nearest",
-        "of the unions told each share 0, 0.1, …, 1 (as `/v1/retrieve` ranks two operands whose union is closed).",
+        "## Identity retrieval (the paper's Table 4)",
+        *RETRIEVAL_NOTE,
+        "",
+        *retrieval_table(metrics),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+RETRIEVAL_NOTE = (
+    "Queries: the full-coverage test pairs (every group and variant); database: every complete posed body",
+    "of the benchmark except the query's own shape (ShapeDNA: each complete shape against the others).",
+    "`operator_union_share_profile`: the same unions untold, each stored shape at its distance to the nearest",
+    "of the unions told each share 0, 0.1, …, 1 (as `/v1/retrieve` ranks two operands whose union is closed).",
+)
+
+
+def summary_table(metrics: dict) -> list[str]:
+    """Per split and variant, pooled over groups: the operator untold and told, its interval's
+    coverage, the baselines, and the served spectral region."""
+    told = metrics.get("overlap_told", {})
+    lines = [
+        "| rows | n | operator mre, untold / told | 90 % coverage | "
+        + " / ".join(BASELINES)
+        + " mre | region from the spectrum: IoU / part cov. err. |",
+        "|---|---|---|---|---|---|",
+    ]
+    groups: dict[str, list[str]] = {}
+    for key in metrics["rows"]:
+        split, _, variant = key.split("/")
+        groups.setdefault(f"{split}/{variant}", []).append(key)
+    for name, keys in sorted(groups.items()):
+        rows = [metrics["rows"][k] for k in keys]
+        weights = [r["rows"] for r in rows]
+
+        def pooled(values: list[float], weights: list[int] = weights) -> float:
+            return float(np.average(values, weights=weights))
+
+        untold = percent(pooled([r["union"]["operator"]["mre"] for r in rows]))
+        told_keys = [k for k in keys if k in told]
+        if told_keys:
+            told_mre = pooled(
+                [told[k]["union"]["told"]["mre"] for k in told_keys], [told[k]["rows"] for k in told_keys]
+            )
+            untold += f" / {percent(told_mre)}"
+        region = [r["localization"][UNION_WITH_PARTS] for r in rows]
+        lines.append(
+            f"| {name} | {sum(weights)} | {untold} | {percent(pooled([r['interval_coverage'] for r in rows]))} | "
+            + " / ".join(percent(pooled([r["union"][b]["mre"] for r in rows])) for b in BASELINES)
+            + f" | {percent(pooled([x['iou'] for x in region]))} / "
+            f"{100 * pooled([x['coverage_error'] for x in region]):.1f} pt |"
+        )
+    return lines
+
+
+def test_c_strata_table(metrics: dict) -> list[str]:
+    """Test C's overlap strata: the operator untold and told beside the best baseline, and its
+    interval's coverage untold."""
+    told = metrics.get("overlap_told", {})
+    lines = [
+        "| Test C stratum / variant | n | operator mre, untold / told | best baseline mre | 90 % coverage |",
+        "|---|---|---|---|---|",
+    ]
+    for key, row in metrics.get("strata", {}).items():
+        if not key.startswith("test_c/"):
+            continue
+        union = row["union"]
+        answer = percent(union["operator"]["mre"])
+        if key in told:
+            answer += f" / {percent(told[key]['union']['told']['mre'])}"
+        best = min(BASELINES, key=lambda b: union[b]["mre"])
+        lines.append(
+            f"| {key.removeprefix('test_c/')} | {row['rows']} | {answer} | {percent(union[best]['mre'])} ({best}) | "
+            f"{percent(row['interval_coverage'])} |"
+        )
+    return lines
+
+
+def render_summary(metrics: dict, command: str) -> str:
+    """The card's section: the union and localization figures pooled, every table in EVALUATION.md."""
+    lines = [
+        BEGIN,
+        f"Produced by `{command}`; every table, row by row, is in `models/{EVALUATION}`.",
+        "",
+        "Union spectrum and region from the spectrum, pooled over the groups of each split:",
+        "",
+        *summary_table(metrics),
+        "",
+        *test_c_strata_table(metrics),
+        "",
+        *session_table(metrics),
+        "",
+        "Identity retrieval (the paper's Table 4):",
         "",
         *retrieval_table(metrics),
         END,
@@ -349,7 +372,7 @@ def _told_section(metrics: dict) -> list[str]:
     if not table:
         return []
     return [
-        "### Told the overlap (`overlap`: the share of the smaller part inside the other, where a client knows it)",
+        "## Told the overlap (`overlap`: the share of the smaller part inside the other, where a client knows it)",
         "The same Test C and Test B rows, the operator told each pair's true share (template areas), then that",
         "share plus Gaussian noise of 0.1 (clipped to 0 … 1), as a client's measurement might be; for an",
         "operator that reads it, told the boundary share too (template edges), exactly and plus noise of 0.06.",
@@ -359,9 +382,10 @@ def _told_section(metrics: dict) -> list[str]:
     ]
 
 
-def update_card(path: Path, metrics: dict, command: str) -> None:
-    """Replace the generated section of the card (or append one)."""
-    replace_block(path, BEGIN, END, render(metrics, command))
+def update_card(models: Path, metrics: dict, command: str) -> None:
+    """Replace the card's generated section (or append one) and write every table to ``EVALUATION.md``."""
+    replace_block(models / CARD, BEGIN, END, render_summary(metrics, command))
+    (models / EVALUATION).write_text(render(metrics, command))
 
 
 def replace_block(path: Path, begin: str, end: str, block: str) -> None:

@@ -17,6 +17,7 @@ import numpy as np
 from app.contract import LOCALIZER_FILE, PROFILE_SHARES, UNION_FILE, UNKNOWN_BOUNDARY
 from app.inference.manifest import write_manifest
 from app.retrieval.seed import SEED_FILE
+from training.glance import update_glance
 from training.learning.baselines import elementwise_min, larger_part
 from training.learning.card import update_card
 from training.learning.data import SpectralData
@@ -216,7 +217,8 @@ def run_pipeline(
     metrics["seconds"] = {"training": round(trained - started, 1), "total": total} if train else {"evaluation": total}
     metrics["data"] = json.loads((data_dir / "manifest.json").read_text())
     (models / "metrics.json").write_text(json.dumps(metrics, indent=1))
-    update_card(models / "MODEL_CARD.md", metrics, command)
+    update_card(models, metrics, command)
+    update_glance(models)
     return metrics
 
 

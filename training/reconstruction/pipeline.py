@@ -15,6 +15,7 @@ import torch
 
 from app.contract import RECONSTRUCTION_FILE
 from app.inference.manifest import write_manifest
+from training.glance import update_glance
 from training.learning.card import replace_block
 from training.learning.data import SpectralData
 from training.learning.evaluate import served_predictors
@@ -36,9 +37,9 @@ DECODER_PRESETS = {
     "standard": (DecoderTraining(), DecoderConfig()),
     # The comparison: the bodies build's own pairs' unions as rows too (needs `build-bodies --pairs`).
     "standard-body-unions": (DecoderTraining(body_unions=True), DecoderConfig()),
-    # The decoder before its partial-union rows (served until 2026-12-03).
+    # The comparison: no partial-union rows, no scans (decision 012).
     "standard-no-partial": (DecoderTraining(partial_rows=0, body_scans=False), DecoderConfig()),
-    # The decoder before the bodies build's scans (served until 2026-12-04).
+    # The comparison: partial-union rows but no scans (decision 012).
     "standard-no-scans": (DecoderTraining(body_scans=False), DecoderConfig()),
 }
 
@@ -101,6 +102,7 @@ def run_decoder_pipeline(
     }
     (models / METRICS_FILE).write_text(json.dumps(metrics, indent=1))
     replace_block(models / "MODEL_CARD.md", BEGIN, END, render(metrics, command))
+    update_glance(models)
     return metrics
 
 

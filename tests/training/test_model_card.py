@@ -1,0 +1,59 @@
+"""The model card's generated parts are current, and the at-a-glance table judges each goal by its
+figure: a card whose tables drifted from the metrics files beside it fails here."""
+
+import copy
+import json
+from pathlib import Path
+
+from training.glance import BEGIN as GLANCE_BEGIN
+from training.glance import END as GLANCE_END
+from training.glance import render_glance, same_region_row, unseen_types_row
+from training.learning.card import BEGIN, END, EVALUATION, render, render_summary
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+CARD = (MODELS / "MODEL_CARD.md").read_text()
+METRICS = json.loads((MODELS / "metrics.json").read_text())
+
+
+def block(text: str, begin: str, end: str) -> str:
+    return text[text.index(begin) : text.index(end) + len(end)]
+
+
+def command_of(section: str) -> str:
+    return section.split("Produced by `", 1)[1].split("`", 1)[0]
+
+
+def test_the_cards_generated_sections_are_what_the_metrics_give():
+    section = block(CARD, BEGIN, END)
+    assert section == render_summary(METRICS, command_of(section))
+    assert block(CARD, GLANCE_BEGIN, GLANCE_END) == render_glance(MODELS)
+
+
+def test_every_table_of_the_evaluation_is_what_the_metrics_give():
+    assert (MODELS / EVALUATION).read_text() == render(METRICS, command_of(block(CARD, BEGIN, END)))
+
+
+def test_the_card_stays_short_and_names_no_tracker():
+    lines = CARD.splitlines()
+    assert len(lines) <= 400
+    assert not any("issue" in line.lower() for line in lines)
+
+
+def test_a_goal_is_met_by_the_told_figure_and_missed_above_it():
+    metrics = copy.deepcopy(METRICS)
+    for variant in ("mesh", "remeshed"):
+        metrics["overlap_told"][f"test_c/same_region/{variant}"]["union"]["told"]["mre"] = 0.019
+    assert same_region_row(metrics)[3] is True
+    metrics["overlap_told"]["test_c/same_region/remeshed"]["union"]["told"]["mre"] = 0.021
+    assert same_region_row(metrics)[3] is False
+
+
+def test_a_figure_the_metrics_do_not_hold_leaves_its_row_out(tmp_path):
+    metrics = copy.deepcopy(METRICS)
+    metrics["rows"] = {key: row for key, row in metrics["rows"].items() if not key.startswith("test_b/")}
+    (tmp_path / "metrics.json").write_text(json.dumps(metrics))
+    table = render_glance(tmp_path)
+    assert unseen_types_row(METRICS)[0] in render_glance(MODELS)
+    assert unseen_types_row(METRICS)[0] not in table and "Test B" not in table
+    assert "U(A, A′)" in table  # the rows whose figures are there stay
+    assert "uploaded camera view" not in table  # no correspondence.json in this folder
