@@ -6,7 +6,7 @@ the service on a free port with its defaults (a solver worker per core), then ru
 
 1. **loop**: one normal client uploads a partial template body (~10 k vertices, ~0.4 MB)
    back to back, first alone for ``--alone`` seconds, then for ``--attacked`` seconds while
-   ``--attackers`` clients send the hostile files of issue 17 in a loop: a disk with 100 000
+   ``--attackers`` clients send hostile files in a loop: a disk with 100 000
    copies of one face, 20 000 fins on one edge, a GLB of 30 000 instances, and an ASCII PLY
    that declares 3 vertices and carries 15 M more lines (30 MB). Printed: the normal client's
    p50 / p95 / max latency in both phases, and each hostile file's status and median time.
@@ -59,7 +59,7 @@ def _disk(points: int, seed: int = 0) -> Mesh:
 
 
 def hostile_files() -> dict[str, tuple[str, bytes]]:
-    """The issue's cheap uploads, each under the default 64 MiB cap: name → (file name, bytes)."""
+    """Cheap hostile uploads, each under the default 64 MiB cap: name → (file name, bytes)."""
     disk = _disk(700)
     copies = Mesh(disk.vertices, np.r_[disk.faces, np.repeat(disk.faces[:1], 100_000, axis=0)])
     a, b = disk.faces[0, :2]

@@ -83,25 +83,6 @@ def hit_rates(
     return {f"top{t}": float(hits[:, i].sum()) / max(len(queries), 1) for i, t in enumerate(TOP)}
 
 
-def feature_hits(
-    query_features: np.ndarray,
-    query_shapes: np.ndarray,
-    stored_features: np.ndarray,
-    identity: np.ndarray,
-    weights: np.ndarray | None = None,
-) -> np.ndarray:
-    """(queries, len(TOP)) whether each query's person is among its t nearest stored shapes (its
-    own shape excluded), by Euclidean distance of (already transformed) retrieval features, each
-    difference times the query's ``weights`` row when given: how the retrieval benchmarks score
-    a distance other than the served one."""
-    weights = np.ones_like(query_features) if weights is None else weights
-    out = []
-    for query, weight, shape in zip(query_features, weights, query_shapes, strict=True):
-        distance = np.sqrt((((stored_features - query) * weight) ** 2).sum(-1))
-        out.append(identity_hits(distance, identity[shape], shape, identity))
-    return np.array(out, dtype=bool).reshape(-1, len(TOP))
-
-
 def identity_hits(distance: np.ndarray, person: int, excluded: int, identity: np.ndarray) -> list[bool]:
     """For each t of TOP, whether ``person`` is among the t stored shapes nearest by ``distance``
     (one query's distance to every stored shape), the stored shape ``excluded`` left out."""
