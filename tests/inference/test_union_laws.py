@@ -17,25 +17,23 @@ from training.data.template import Template
 from training.learning.laws import law_parts, measure_laws
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
-# Measured on the committed models (2026-12-03, evening, model 141ec35c4e53, `python
-# benchmarks/bench_union_laws.py`), each with ~10 % margin for other CPUs' rounding; U(A, A) is
+# Measured on the committed models (`python benchmarks/bench_union_laws.py`, its table in
+# benchmarks/RESULTS.md), each with ~10 % margin for other CPUs' rounding; U(A, A) is
 # exact by construction (the coincidence gate), so its tolerance is float32 rounding of the graph's
-# log and exp. Issue 16's goals: U(A, A) within 0.5 % and U(A, A′) ≤ 2 % are met here; U(A, B) ≈ B
+# log and exp. The goals U(A, A) within 0.5 % and U(A, A′) ≤ 2 % are met here; U(A, B) ≈ B
 # for A ⊂ B is not untold (11 %, see the card), and is told the overlap (0.3 %).
-# Idempotence (mean, worst): measured 3.2e-8, 5.0e-8 (previous model 0.0333, 0.228; before it 0.285, 0.473).
+# Idempotence (mean, worst): measured below 1e-7.
 IDEMPOTENCE = (1e-6, 1e-6)
-SAME_REGION = 0.0031  # mean; measured 0.00280 (model b8fb3a571cc7 0.00280; before the gate 0.0649, 0.247)
-ABSORPTION = 0.126  # mean; measured 0.1145 (model b8fb3a571cc7 0.1000; before the gate 0.0939, 0.222)
-# Whole body, mean over λ₂…λ₂₀: measured 0.0085 (model b8fb3a571cc7 0.0135; before the gate 0.0206;
-# λ₁ 0 in all, 0.14·λ₂ before the gate).
+SAME_REGION = 0.0031  # mean; measured 0.00280
+ABSORPTION = 0.126  # mean; measured 0.1145
+# Whole body, mean over λ₂…λ₂₀: measured 0.0085 (λ₁ 0 in all).
 WHOLE_BODY = 0.0094
-# Told the overlap (1 for every one of these cases), answered by the told specialist since model
-# 72d5281c3617 (2026-12-04): measured means 0.00280, 0.00276, < 5e-6 (the told correction before
-# it: 0.00290, 0.01144, 0.00130).
+# Told the overlap (1 for every one of these cases), answered by the told specialist: measured
+# means 0.00280, 0.00276, < 5e-6.
 SAME_REGION_TOLD, ABSORPTION_TOLD, WHOLE_BODY_TOLD = 0.0031, 0.0031, 1e-4
 # Told the boundary share too (each case's own from the template's edges; ½ for a region twice, 0
-# with the closed body), answered by the boundary specialist since model d2fee4b1c9a4 (2026-12-04):
-# measured means 0.00280, 0.00177, < 5e-6 (worst 0.00701, 0.00965, 1e-5).
+# with the closed body), answered by the boundary specialist: measured means 0.00280, 0.00177,
+# < 5e-6 (worst 0.00701, 0.00965, 1e-5).
 SAME_REGION_BOUNDARY, ABSORPTION_BOUNDARY, WHOLE_BODY_BOUNDARY = 0.0031, 0.0020, 1e-4
 
 

@@ -1,1 +1,1 @@
-"""Shape from spectrum: the complete body rebuilt from a union's spectrum (issue 22)."""
+"""Shape from spectrum: the complete body rebuilt from a union's spectrum."""

@@ -3,9 +3,9 @@
 A body scanned standing all round is never closed: the soles stand on the floor, the top of the
 head is rarely seen, and an armpit or the crotch hides from every view. A hole of 0.2 % of the
 body's area lifts λ₁ from 0 to ~0.6/m² and shifts every eigenvalue whose mode does not vanish
-there, so a decoder that learned closed bodies answers such a scan with a stranger: the one
-served until 2026-12-03 rebuilt unknown people from spectra without their soles at 110 mm
-instead of 3. Blind spots are cut out of the template (so any body on its topology, posed or
+there, so a decoder that learned closed bodies answers such a scan with a stranger: one trained on
+closed bodies alone rebuilt unknown people from spectra without their soles at 110 mm instead
+of 3 (decision 012). Blind spots are cut out of the template (so any body on its topology, posed or
 not, can be scanned) and each scan is solved as the data build solves a part: the bodies
 build's scans teach the decoder (:mod:`training.reconstruction.unions`), the benchmark's
 unknown people's posed bodies test it.
