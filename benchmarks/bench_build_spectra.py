@@ -1,6 +1,6 @@
 """Speed of the data build's spectra stage, measured on a sample of a built data set's own tasks.
 
-Run: ``.venv/bin/python benchmarks/bench_build_spectra.py --data data/standard --tasks 2000``
+Run: ``python -m benchmarks.bench_build_spectra --data data/standard --tasks 2000``
 (needs a built data set: ``make dataset``). A uniform sample of the build's distinct
 (shape, mask, variant) tasks goes through the build's own worker function on the build's own
 process pool, chunked as the build chunks them, so the wall time per task is what the full
@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from training.benchmark_arguments import benchmark_parser
+from benchmarks.arguments import benchmark_parser
 from training.data.workers import chunks, run_tasks, solve_chunk
 
 

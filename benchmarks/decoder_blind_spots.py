@@ -1,6 +1,6 @@
 """A complete scan with blind spots, decoded: which blind spot costs what.
 
-    python benchmarks/decoder_blind_spots.py [--data data/standard] [--models models] [--other DIR]
+    python -m benchmarks.decoder_blind_spots [--data data/standard] [--models models] [--other DIR]
 
 The benchmark's unknown people (the decoder's test identities), every complete posed body scanned
 with one kind of blind spot at a time, each kind a fixed size: the soles (1.5 cm above the lowest
@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from app.inference.models import SpectralModels
-from training.benchmark_arguments import benchmark_parser
+from benchmarks.arguments import benchmark_parser
 from training.learning.data import SpectralData
 from training.reconstruction.blind_spots import (
     above_soles,

@@ -1,6 +1,6 @@
 """How well the service measures two views' overlap, and what the union gains from it.
 
-    python benchmarks/measured_overlap.py [--data data/standard] [--models models] [--rows 400]
+    python -m benchmarks.measured_overlap [--data data/standard] [--models models] [--rows 400]
         [--points 32768] [--split test_c]
 
 Test C's camera-view pairs whose two views are in one pose (the same posed body, as a scanner's
@@ -30,10 +30,10 @@ from app.geometry.overlap import (
     measured_fold,
 )
 from app.geometry.topology import boundary_vertex_mask
-from training.benchmark_arguments import benchmark_parser
+from benchmarks.arguments import benchmark_parser
 from training.data.spectra import MESH, REMESHED, region_mesh, remeshed
 from training.learning.data import SpectralData
-from training.learning.evaluate import served_predictors, served_told_predictor
+from training.learning.predictors import served_predictors, served_told_predictor
 from training.learning.spectral_errors import spectral_errors
 
 

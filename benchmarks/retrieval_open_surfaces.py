@@ -1,6 +1,6 @@
 """Identity from an open surface: its own spectrum against the spectrum of the body rebuilt from it.
 
-    python benchmarks/retrieval_open_surfaces.py [--data data/standard] [--models models]
+    python -m benchmarks.retrieval_open_surfaces [--data data/standard] [--models models]
 
 The store holds complete shapes' closed spectra (ShapeDNA, λ₁ = 0). A scan with holes — a whole
 body scanned standing, which misses its soles, the top of its head, an armpit — has a boundary,
@@ -26,11 +26,11 @@ import numpy as np
 from app.contract import PROFILE_SHARES
 from app.inference.body import open_surface
 from app.inference.models import SpectralModels
-from training.benchmark_arguments import benchmark_parser
+from benchmarks.arguments import benchmark_parser
 from training.data.pairs import PARTIAL_UNION
 from training.data.spectra import MESH
 from training.learning.data import SpectralData
-from training.learning.evaluate import served_predictors
+from training.learning.predictors import served_predictors
 from training.learning.shapedna import TOP, full_coverage_pairs, hit_rates, stored_bodies
 from training.reconstruction.blind_spots import blind_spot_masks, scans_of_shapes
 from training.reconstruction.evaluate import (

@@ -1,6 +1,6 @@
 """What a scanning session's chained union gives downstream, and what limits it: the union or the coverage.
 
-    python benchmarks/session_downstream.py [--data data/standard] [--models models]
+    python -m benchmarks.session_downstream [--data data/standard] [--models models]
 
 Test C's chains of five consecutive camera views (unseen identities), read by the served
 localizer (``/v1/localize``'s) and the served shape decoder (``/v1/reconstruct``'s) from three
@@ -22,10 +22,10 @@ import numpy as np
 from app.inference.body import open_surface
 from app.inference.models import SpectralModels, chained_sigma
 from app.inference.template import localized_region
-from training.benchmark_arguments import benchmark_parser
+from benchmarks.arguments import benchmark_parser
 from training.learning.data import SpectralData
-from training.learning.evaluate import served_predictors, served_told_predictor
 from training.learning.masks import SERVED_LOCALIZER, symmetric_scores
+from training.learning.predictors import served_predictors, served_told_predictor
 from training.learning.shapedna import hit_rates, stored_bodies
 from training.reconstruction.evaluate import body_scores, closed_spectra
 from training.reconstruction.train import data_set_rest_bodies

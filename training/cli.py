@@ -104,7 +104,8 @@ def score_command(
     import json
 
     from training.learning.data import SpectralData
-    from training.learning.evaluate import evaluate, served_predictors, served_told_predictor
+    from training.learning.evaluate import evaluate
+    from training.learning.predictors import served_predictors, served_told_predictor
 
     metrics = evaluate(SpectralData(data, seed=seed), *served_predictors(models), served_told_predictor(models))
     out.write_text(json.dumps(metrics, indent=1))

@@ -129,18 +129,6 @@ def identity_row(metrics: dict) -> Row:
     )
 
 
-UNION_ROWS = (
-    same_region_row,
-    nested_row,
-    shared_row,
-    unseen_types_row,
-    sessions_row,
-    coverage_row,
-    spectral_region_row,
-    identity_row,
-)
-
-
 def decoder_row(metrics: dict) -> Row:
     """The shape decoder's row (``reconstruction.json``)."""
     sets = metrics["sets"]

@@ -212,7 +212,7 @@ def test_a_whole_body_scan_uploaded_with_its_holes_capped_is_rebuilt_as_the_clos
         rigidly_aligned(np.array(rebuilt["vertices"]), template.vertices) - template.vertices, axis=1
     )
     # Measured: 9.0 mm, the closed template 7.1 (left open: 8.2, which the union network learned
-    # soles-cut scans for; on unknown people capping halves the error, benchmarks/decoder_blind_spots.py).
+    # soles-cut scans for; on unknown people capping halves the error, benchmarks.decoder_blind_spots).
     assert error.mean() < closed_error.mean() + 0.003
     assert answer["spectrum_relative_error"] <= GAP_WARNING and answer["warnings"] == []
     two = [("files", ("a.ply", io.BytesIO(ply))), ("files", ("b.ply", io.BytesIO(ply)))]

@@ -6,29 +6,21 @@ errors next to the baselines' (same rows, same run), the calibration of the oper
 parts and the pose noise floor (one region of one identity across poses) complete the picture.
 """
 
-from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
-import onnxruntime as ort
 
 from app.contract import (
     INTERVAL_Z,
-    LOCALIZER_FILE,
-    LOCALIZER_INPUTS,
     MASK_THRESHOLD,
-    UNION_FILE,
-    union_feeds,
 )
-from app.inference.models import chained_sigma, graph_inputs, reads_boundary, reads_overlap
+from app.inference.models import chained_sigma
 from app.inference.template import localized_region
 from training.data.overlaps import CAMERA
 from training.data.pairs import FULL_COVERAGE, NESTED_SHARE, PARTIAL_UNION
 from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
 from training.learning.baselines import UnionLookup, disjoint_union, elementwise_min, larger_part
 from training.learning.data import PairTable, SpectralData
-from training.learning.localizer_net import Localizer
 from training.learning.masks import (
     PARTS_UNITED,
     SERVED_LOCALIZER,
@@ -36,10 +28,8 @@ from training.learning.masks import (
     symmetric_scores,
     united_by_mirror_rule,
 )
+from training.learning.predictors import RegionPredictor, ToldPredictor, UnionPredictor
 from training.learning.spectral_errors import spectral_errors
-from training.learning.train_localizer import probabilities
-from training.learning.union_net import UnionOperator
-from training.learning.union_predict import predict
 
 GROUPS = ("known_man", "unknown_man", "unknown_woman", "known_woman", "child")
 SPLITS = ("test_a", "test_b")
@@ -95,91 +85,11 @@ PAPER_IOU = {
 }
 
 
-UnionPredictor = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # (a, b) → (union, σ)
-
-
-@dataclass(frozen=True)
-class ToldPredictor:
-    """(a, b, overlap[, boundary]) → (union, σ): an operator told each pair's overlap, and its
-    boundary share where it reads one (``reads_boundary``)."""
-
-    predict: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None], tuple[np.ndarray, np.ndarray]]
-    reads_boundary: bool
-
-    def __call__(
-        self, a: np.ndarray, b: np.ndarray, overlap: np.ndarray, boundary: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        if boundary is not None and not self.reads_boundary:
-            raise ValueError("this operator does not read the boundary share")
-        return self.predict(a, b, overlap, boundary)
-
-
 # The told overlap as a caller measures it: the true share plus this much absolute noise (fixed seed).
 TOLD_NOISE = 0.1
 # The told boundary share as a caller measures it: the true one plus this much absolute noise
-# (twice the mean error of one measured from registered views, benchmarks/measured_overlap.py).
+# (twice the mean error of one measured from registered views, benchmarks.measured_overlap).
 BOUNDARY_NOISE = 0.06
-RegionPredictor = Callable[[np.ndarray], np.ndarray]  # spectra → (m, n) each template vertex's probability
-
-
-def trained_predictors(
-    union: UnionOperator, localizers: dict[str, Localizer]
-) -> tuple[UnionPredictor, dict[str, RegionPredictor]]:
-    """The PyTorch models as the evaluator's predictors."""
-    regions = {name: (lambda spectra, model=model: probabilities(model, spectra)) for name, model in localizers.items()}
-    return (lambda a, b: predict(union, a, b)), regions
-
-
-def told_predictor(union: UnionOperator) -> ToldPredictor | None:
-    """The operator told each pair's overlap, or None for one that does not read it."""
-    if not union.config.overlap_hint:
-        return None
-    told = lambda a, b, overlap, boundary: predict(union, a, b, overlap=overlap, boundary=boundary)  # noqa: E731
-    return ToldPredictor(told, union.reads_boundary)
-
-
-def served_predictors(models: Path, batch: int = 1024) -> tuple[UnionPredictor, dict[str, RegionPredictor]]:
-    """The exported ONNX graphs of a models folder as the evaluator's predictors: how a committed
-    model (this one or an earlier one) scores on a data set it was not evaluated on."""
-    from training.onnx_export import session
-
-    union_graph, localizer_graph = session(models / UNION_FILE), session(models / LOCALIZER_FILE)
-
-    def union(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return _run_union(union_graph, a, b, None, batch)  # told nothing
-
-    def region(spectra: np.ndarray) -> np.ndarray:
-        return localizer_graph.run(None, {LOCALIZER_INPUTS[0]: spectra.astype(np.float32)})[0]
-
-    return union, {SERVED_LOCALIZER: region}
-
-
-def served_told_predictor(models: Path, batch: int = 1024) -> ToldPredictor | None:
-    """The exported union graph told each pair's overlap, or None for a graph without that input."""
-    from training.onnx_export import session
-
-    graph = session(models / UNION_FILE)
-    if not reads_overlap(graph):
-        return None
-    told = lambda a, b, overlap, boundary: _run_union(graph, a, b, overlap, batch, boundary)  # noqa: E731
-    return ToldPredictor(told, reads_boundary(graph))
-
-
-def _run_union(
-    graph: ort.InferenceSession,
-    a: np.ndarray,
-    b: np.ndarray,
-    overlap: np.ndarray | None,
-    batch: int,
-    boundary: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """(union, σ) of an onnxruntime union graph, in batches; told nothing of what is None."""
-    reads, outputs = graph_inputs(graph), []
-    for start in range(0, len(a), batch):
-        window = slice(start, start + batch)
-        told, edge = (None if x is None else x[window] for x in (overlap, boundary))
-        outputs.append(graph.run(None, union_feeds(reads, a[window], b[window], told, edge)))
-    return np.concatenate([o[0] for o in outputs]), np.concatenate([o[1] for o in outputs])
 
 
 def strata(data: SpectralData, rows: PairTable) -> np.ndarray:

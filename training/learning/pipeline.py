@@ -21,11 +21,12 @@ from training.glance import update_glance
 from training.learning.baselines import elementwise_min, larger_part
 from training.learning.card import update_card
 from training.learning.data import SpectralData
-from training.learning.evaluate import evaluate, told_predictor, trained_predictors
+from training.learning.evaluate import evaluate
 from training.learning.export import export_localizer, export_union, localizer_parity, union_parity
 from training.learning.fit import is_finished, validation_history
 from training.learning.localizer_net import Localizer, LocalizerConfig
 from training.learning.masks import SERVED_LOCALIZER
+from training.learning.predictors import told_predictor, trained_predictors
 from training.learning.shapedna import complete_shapes, full_coverage_pairs, retrieval_table, save_seed
 from training.learning.train_localizer import LocalizerTraining, train_localizer
 from training.learning.train_union import UnionTraining, train_union

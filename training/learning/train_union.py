@@ -65,7 +65,7 @@ class UnionTraining(LoopSettings):
     told_learning_rate: float = 2e-3
     # The boundary specialist (UnionConfig.told_boundary) is told each row's boundary share with
     # this much absolute noise: measured from registered views it is off by 0.03 on average, 0.06
-    # at the 95th percentile (the Test C sessions, benchmarks/measured_overlap.py).
+    # at the 95th percentile (the Test C sessions, benchmarks.measured_overlap).
     boundary_noise: float = 0.04
 
 

@@ -18,7 +18,7 @@ from app.inference.manifest import write_manifest
 from training.glance import update_glance
 from training.learning.card import replace_block
 from training.learning.data import SpectralData
-from training.learning.evaluate import served_predictors
+from training.learning.predictors import served_predictors
 from training.reconstruction.bodies import BODIES_FILE
 from training.reconstruction.decoder import DecoderConfig, ShapeBasis
 from training.reconstruction.evaluate import evaluate_decoder

@@ -5,7 +5,7 @@ scanned with its soles or the top of its head unseen, or scans that leave a part
 boundary, and its spectrum is of another kind (λ₁ > 0, every eigenvalue raised): ranked as it
 is, the nearest stored shapes are the smallest bodies, whoever was scanned. Such a union is
 ranked through the body the shape decoder rebuilds from it, whose own closed spectrum is
-comparable (``benchmarks/retrieval_open_surfaces.py``: complete scans with blind spots found
+comparable (``benchmarks.retrieval_open_surfaces``: complete scans with blind spots found
 first 35 % of the time instead of 1 %). That costs a solve, so the route is admitted like an
 upload (``app.main``). A whole-body scan uploaded as a mesh does better still with
 ``cap_holes=true``: its blind spots capped, it is a closed surface and ranked as one (65 %).
@@ -15,7 +15,7 @@ number: a closed union of two is ranked by its **share profile**, each stored sh
 distance to the nearest of the unions told each share of ``PROFILE_SHARES``, i.e. under the
 overlap that explains that shape best (the card's two-part union queries: the right person
 first 60 → 74 % of the time among the closed ones, 57 → 70 % over all of them as ranked; told
-the true share, 77 %; ``benchmarks/retrieval_open_surfaces.py``).
+the true share, 77 %; ``benchmarks.retrieval_open_surfaces``).
 """
 
 from typing import Annotated, Literal
