@@ -1,4 +1,4 @@
-"""The k smallest eigenvalues of a pencil, solved in slices of the spectrum.
+"""The k smallest eigenpairs of a pencil, solved in slices of the spectrum.
 
 Why: ARPACK's work beyond the triangular solves grows with the square of how many eigenvalues
 it is asked for (its Lanczos basis of 2k + 1 vectors is re-orthogonalized at every step), so at
@@ -12,6 +12,12 @@ inertia), so the eigenvalues ARPACK finds around σ get their indices in the spe
 guess. Each slice must reach down into the previous one; where the two overlap, both solves must
 agree (to ``OVERLAP_TOLERANCE``), so a slice that missed an eigenvalue or took one from the next
 cluster shows as a disagreement, and the caller falls back to one plain solve.
+
+Eigenfunctions come from each slice's own solve. Those of distinct eigenvalues are orthogonal
+whichever solve found them; a cluster cut by a slice's edge is the exception (two solves may
+each return a direction of the same eigenspace). So two slices' eigenfunctions are joined at
+the widest gap of their overlap, and the joined basis must be M-orthonormal, or the caller
+solves in one piece.
 """
 
 import math
@@ -39,14 +45,19 @@ SLICE_RESTARTS = 10
 # An eigenvalue closer to an interior shift than this, relative to the spectrum's mean spacing,
 # makes that shift's count of the eigenvalues below it ambiguous (the sign of a pivot ~0).
 SINGULAR_DISTANCE = 1e-9
+# The joined eigenfunctions' largest departure from M-orthonormality accepted.
+ORTHONORMAL_TOLERANCE = 1e-10
 
 
 class InconsistentSlices(Exception):
     """Two slices disagree, or a slice cannot be tied to the known ones: solve in one piece."""
 
 
-def sliced_eigenvalues(pencil: ShiftedPencil, k: int, size: int = SLICE_SIZE) -> np.ndarray:
-    """The ``k`` smallest eigenvalues of ``pencil``, ascending, in slices of about ``size``.
+def sliced_eigenpairs(
+    pencil: ShiftedPencil, k: int, size: int = SLICE_SIZE, *, vectors: bool = False
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The ``k`` smallest eigenvalues of ``pencil``, ascending, in slices of about ``size``, with
+    their M-orthonormal eigenfunctions on the free vertices when ``vectors``.
 
     Raises
     ------
@@ -62,7 +73,7 @@ def sliced_eigenvalues(pencil: ShiftedPencil, k: int, size: int = SLICE_SIZE) ->
     if lowest.below:  # a negative eigenvalue: the plain solve reports it as such
         raise InconsistentSlices("an eigenvalue lies below the lowest shift")
     values = np.full(k, np.nan)
-    values[:size] = pencil.nearest(lowest, size)[0]
+    values[:size], functions = pencil.nearest(lowest, size, vectors=vectors)
     top = size - 1  # values[: top + 1] are known
     while top < k - 1:
         wanted = min(size, k - 1 - top)
@@ -70,7 +81,7 @@ def sliced_eigenvalues(pencil: ShiftedPencil, k: int, size: int = SLICE_SIZE) ->
         shift = values[top] + spacing * (wanted + 1) / 2
         try:
             factor = pencil.factor(shift)
-            first, block = _block_reaching(pencil, factor, top, size)
+            first, block, block_functions = _block_reaching(pencil, factor, top, size, vectors)
         except SolverFailure as exc:  # LDLᵀ without pivoting, or ARPACK, broke down at this shift
             raise InconsistentSlices(f"the slice at {shift:g} broke down: {exc}") from exc
         if np.abs(block - factor.shift).min() < SINGULAR_DISTANCE * spacing:
@@ -79,14 +90,42 @@ def sliced_eigenvalues(pencil: ShiftedPencil, k: int, size: int = SLICE_SIZE) ->
         if np.abs(block[: len(overlap)] - overlap).max() > OVERLAP_TOLERANCE * spacing:
             raise InconsistentSlices("two slices disagree where they overlap")
         new = block[len(overlap) :][: k - 1 - top]
+        if vectors:
+            cut = _widest_gap(values, first, top, new[0])
+            functions = np.hstack([functions[:, :cut], block_functions[:, cut - first : len(overlap) + len(new)]])
         values[top + 1 : top + 1 + len(new)] = new
         top += len(new)
-    return values
+    if not vectors:
+        return values, None
+    return values, _orthonormal(pencil, functions)
 
 
-def _block_reaching(pencil: ShiftedPencil, factor: Factor, top: int, size: int) -> tuple[int, np.ndarray]:
-    """The eigenvalues nearest ``factor.shift`` and the index of the lowest, asking ARPACK for
-    more until they reach down to index ``top`` and beyond it (or until ARPACK converges).
+def _widest_gap(values: np.ndarray, first: int, top: int, next_value: float) -> int:
+    """Where a new slice's eigenfunctions take over from the known ones: the index in the overlap
+    ``first`` … ``top`` (or just past it) after the widest gap, so that a cluster is cut, if at
+    all, where its members lie farthest apart (the whole overlap from the new slice when it
+    reaches the lowest eigenvalue)."""
+    if first == 0:
+        return 0
+    gaps = np.diff(np.r_[values[first - 1 : top + 1], next_value])
+    return first + int(np.argmax(gaps))
+
+
+def _orthonormal(pencil: ShiftedPencil, functions: np.ndarray) -> np.ndarray:
+    """``functions``, refused unless M-orthonormal (two solves that each returned a direction of
+    one eigenspace cut by a slice's edge leave two nearly parallel columns)."""
+    standard = functions / pencil.inverse_root[:, None]  # M^1/2 x: M-inner products become dot products
+    if np.abs(standard.T @ standard - np.eye(functions.shape[1])).max() > ORTHONORMAL_TOLERANCE:
+        raise InconsistentSlices("the slices' eigenfunctions are not M-orthonormal where they join")
+    return functions
+
+
+def _block_reaching(
+    pencil: ShiftedPencil, factor: Factor, top: int, size: int, vectors: bool
+) -> tuple[int, np.ndarray, np.ndarray | None]:
+    """The index of the lowest of the eigenvalues nearest ``factor.shift``, those eigenvalues and
+    (with ``vectors``) their eigenfunctions, asking ARPACK for more until they reach down to index
+    ``top`` and beyond it (or until ARPACK converges).
 
     As many are asked for as lie between the known ones and the shift, twice (the shift is meant
     to sit in the middle of the slice), and at least a slice's ``size``, plus ``MARGIN``: a
@@ -100,15 +139,15 @@ def _block_reaching(pencil: ShiftedPencil, factor: Factor, top: int, size: int) 
     while True:
         count = min(count, pencil.size - 1)
         try:
-            found = pencil.nearest(factor, count, restarts=SLICE_RESTARTS)[0]
+            found, functions = pencil.nearest(factor, count, vectors=vectors, restarts=SLICE_RESTARTS)
         except NoConvergence:
-            found = None
+            found = functions = None
         if found is not None:
             first = factor.below - int(np.count_nonzero(found < factor.shift))
             if first < 0:
                 raise InconsistentSlices("more eigenvalues found below the shift than lie there")
             if first <= top < first + count - 1:
-                return first, found
+                return first, found, functions
         if count == pencil.size - 1:
             raise InconsistentSlices("a slice cannot reach the known eigenvalues")
         count += count // 2 + 1

@@ -18,7 +18,7 @@ import scipy.sparse as sp
 from app.geometry.errors import SolverFailure
 from app.geometry.laplacian import Operators
 from app.geometry.pencil import ShiftedPencil, lowest_shift
-from app.geometry.slicing import SLICED_ABOVE, InconsistentSlices, sliced_eigenvalues
+from app.geometry.slicing import SLICED_ABOVE, InconsistentSlices, sliced_eigenpairs
 
 DEFAULT_K = 20
 MAX_K = 200
@@ -45,9 +45,8 @@ def eigenpairs(
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """The ``k`` smallest eigenvalues of (S, M), ascending, with x = 0 on ``fixed`` vertices.
 
-    Values alone beyond ``SLICED_ABOVE`` are solved in slices (if the slices cannot be joined
-    with certainty, which they always could on the shapes measured, in one piece); eigenfunctions
-    come from one ARPACK solve.
+    Beyond ``SLICED_ABOVE`` eigenpairs are solved in slices (if the slices cannot be joined with
+    certainty, which they always could on the shapes measured, in one piece).
 
     Parameters
     ----------
@@ -72,13 +71,13 @@ def eigenpairs(
         When the factorization or ARPACK fails (a pathological shape).
     """
     pencil = _pencil(operators, k, fixed)
-    if k > SLICED_ABOVE and not vectors:
+    if k > SLICED_ABOVE:
         try:
-            values = sliced_eigenvalues(pencil, k)
+            values, functions = sliced_eigenpairs(pencil, k, vectors=vectors)
         except InconsistentSlices:
-            return _solved(pencil, k, vectors=False)
+            return _solved(pencil, k, vectors=vectors)
         _require_a_spectrum(values)
-        return values, None
+        return values, functions
     return _solved(pencil, k, vectors=vectors)
 
 
