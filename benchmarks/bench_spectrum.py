@@ -3,13 +3,19 @@
 Run: ``python benchmarks/bench_spectrum.py`` (needs ``pip install -e '.[train,dev]'`` for
 anny, fast-simplification, LaPy and cholespy). Prints, as a Markdown table, median-of-N
 milliseconds on closed anny bodies of ~5 k and ~13 k vertices (and ~53 k with ``--large``) and
-an ~8 k-vertex Dirichlet region, at k = 20, 100 and 200: our engine split into assembly (the
+an ~8 k-vertex Dirichlet region and a ~6 k-vertex depth-camera view (the data build's ray
+casting), at k = 20 and 128 by default: our engine split into assembly (the
 intrinsic-Delaunay Laplacian), factorization (the shifted LDLᵀ) and iteration (ARPACK, by
 difference from the total), LaPy with SciPy's SuperLU (its default) and LaPy with CHOLMOD
 (``use_cholmod=True``, through the cholespy wheel), each assembly and solve together, in one
 run on one machine; and how far our eigenvalues are from a plain SciPy solve of the same
 matrices. LaPy has no Dirichlet option, so on the region it solves the Neumann problem (the
 same matrix sizes and the same work).
+
+``--eigenbasis`` times instead eigenvalues with their eigenfunctions (k = 64 and 128 by
+default), as the correspondence model's inputs need them: ours on the free-boundary (Neumann)
+problem, and on shapes with a boundary the Dirichlet one as served, against LaPy-CHOLMOD, whose
+solve always returns them.
 
 ``--http`` measures instead what a client sees: ``POST /v1/spectrum`` of the 13 k body to the
 service started on its embedded defaults (its solver workers on one BLAS thread each), one
@@ -32,7 +38,7 @@ import trimesh
 from app.geometry.laplacian import Operators, mesh_operators
 from app.geometry.pencil import ShiftedPencil
 from app.geometry.shapes import Mesh
-from app.geometry.spectrum import eigenvalues, shift_for
+from app.geometry.spectrum import eigenpairs, eigenvalues, shift_for
 from app.geometry.topology import boundary_vertex_mask, drop_unreferenced, largest_component
 
 
@@ -44,6 +50,17 @@ def anny_body() -> Mesh:
     vertices = model()["vertices"][0].detach().double().numpy()
     faces = model.get_triangular_faces().numpy().astype(np.int64)
     return Mesh(*drop_unreferenced(vertices, faces))
+
+
+def camera_view(body: Mesh) -> Mesh:
+    """What a depth camera 1.8 m in front of the body sees: the data build's ray casting, its
+    largest component (~6 k vertices, a boundary all round)."""
+    from training.data.camera import body_mesh, orbit_camera, visible_vertices
+
+    mesh = body_mesh(body.vertices, body.faces)
+    seen = visible_vertices(mesh, orbit_camera(mesh, azimuth=-np.pi / 2, distance=1.8, height=0.6, aim=0.5))
+    faces, _ = largest_component(body.vertices, body.faces[seen[body.faces].all(axis=1)])
+    return Mesh(*drop_unreferenced(body.vertices, faces))
 
 
 def bodies(large: bool) -> dict[str, tuple[Mesh, np.ndarray | None]]:
@@ -60,6 +77,8 @@ def bodies(large: bool) -> dict[str, tuple[Mesh, np.ndarray | None]]:
         "closed body": (body, None),
         "Dirichlet region": (region, boundary_vertex_mask(region.faces, len(region.vertices))),
     }
+    view = camera_view(body)
+    shapes["camera view"] = (view, boundary_vertex_mask(view.faces, len(view.vertices)))
     if large:
         fine = trimesh.Trimesh(body.vertices, body.faces, process=False).subdivide()
         shapes["closed body, subdivided"] = (Mesh(np.asarray(fine.vertices), np.asarray(fine.faces)), None)
@@ -125,6 +144,33 @@ def measure(mesh: Mesh, fixed: np.ndarray | None, k: int, repeats: int) -> dict[
     return {**times, "deviation": deviation}
 
 
+def eigenbasis(mesh: Mesh, fixed: np.ndarray | None, k: int) -> None:
+    """Our assembly and solve of ``k`` eigenpairs, with x = 0 on ``fixed``."""
+    eigenpairs(mesh_operators(mesh.vertices, mesh.faces), k, fixed, vectors=True)
+
+
+def eigenbasis_table(shapes: dict[str, tuple[Mesh, np.ndarray | None]], ks: list[int], repeats: int) -> None:
+    """Eigenvalues with eigenfunctions, ours (Neumann, and Dirichlet where the shape has a
+    boundary) against LaPy-CHOLMOD, each assembly and solve together, as a Markdown table."""
+    print(
+        "| shape | n | k | ours, Neumann | ours, Dirichlet | LaPy CHOLMOD | ×CHOLMOD (Neumann) | ×CHOLMOD (Dirichlet) |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
+    for name, (mesh, fixed) in shapes.items():
+        for k in ks:
+            runs = {"neumann": partial(eigenbasis, mesh, None, k), "cholmod": partial(lapy_cholmod, mesh, k)}
+            if fixed is not None:
+                runs["dirichlet"] = partial(eigenbasis, mesh, fixed, k)
+            t = interleaved_ms(runs, repeats)
+            dirichlet = t.get("dirichlet")
+            cells = ("—", "—") if dirichlet is None else (f"{dirichlet:.0f}", f"{t['cholmod'] / dirichlet:.2f}")
+            print(
+                f"| {name} | {len(mesh.vertices)} | {k} | {t['neumann']:.0f} | {cells[0]} | {t['cholmod']:.0f} "
+                f"| {t['cholmod'] / t['neumann']:.2f} | {cells[1]} |",
+                flush=True,
+            )
+
+
 def over_http(mesh: Mesh, ks: list[int], repeats: int, port: int) -> None:
     """``POST /v1/spectrum`` of ``mesh`` (PLY) to the service started on its embedded defaults,
     one client, against LaPy-CHOLMOD in process, as a Markdown table."""
@@ -155,13 +201,18 @@ def over_http(mesh: Mesh, ks: list[int], repeats: int, port: int) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--k", type=int, nargs="+", default=[20, 100, 200])
+    parser.add_argument("--k", type=int, nargs="+", help="default: 20 128 (64 128 with --eigenbasis)")
     parser.add_argument("--large", action="store_true", help="also the ~53 k-vertex subdivided body")
     parser.add_argument("--http", action="store_true", help="instead: the service's /v1/spectrum of the body")
+    parser.add_argument("--eigenbasis", action="store_true", help="instead: eigenvalues with their eigenfunctions")
     parser.add_argument("--port", type=int, default=8766, help="with --http")
     args = parser.parse_args()
+    if args.eigenbasis:
+        eigenbasis_table(bodies(args.large), args.k or [64, 128], args.repeats)
+        return
+    ks = args.k or [20, 128]
     if args.http:
-        over_http(anny_body(), args.k, args.repeats, args.port)
+        over_http(anny_body(), ks, args.repeats, args.port)
         return
     print(
         "| shape | n | k | ours: assembly | factorization | iteration | total | LaPy SuperLU | LaPy CHOLMOD "
@@ -169,7 +220,7 @@ def main() -> None:
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, (mesh, fixed) in bodies(args.large).items():
-        for k in args.k:
+        for k in ks:
             r = measure(mesh, fixed, k, args.repeats)
             print(
                 f"| {name} | {len(mesh.vertices)} | {k} | {r['assembly']:.0f} | {r['factorization']:.0f} "
