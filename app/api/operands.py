@@ -8,7 +8,6 @@ error names the operand it is about.
 
 import asyncio
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
@@ -233,21 +232,25 @@ async def _no_operand(request: Request) -> str:
     )
 
 
-async def resolve_operands(
-    request: Request,
-    settings: Settings,
-    sent: SentOperands,
-    k: int,
-    check_count: Callable[[int], object] | None = None,
-    wanted: Wanted = SPECTRA_ONLY,
-) -> tuple[list[Operand], float]:
-    """Every operand's spectrum (at least one), and the milliseconds spent solving uploaded files.
-    ``check_count`` sees how many operands there are before any upload is solved (a mismatch
-    it raises costs no solve); ``wanted`` says what else each uploaded file's operand carries
-    (with ``cap_holes`` the one operand must be an uploaded scan, solved with its holes capped)."""
-    files, spectra, cap_holes = sent.files, sent.spectra, wanted.cap_holes
-    given = parse_spectra(spectra, k)
-    count = len(files) + len(given)
+@dataclass(frozen=True)
+class CountedOperands:
+    """A request's operands parsed and counted, nothing solved yet: the uploaded files as sent and
+    the spectra checked, so that whatever depends on how many operands there are (the overlaps
+    told per step) is checked before any upload costs a solve."""
+
+    sent: SentOperands
+    spectra: list[list[float]]
+
+    @property
+    def count(self) -> int:
+        return len(self.sent.files) + len(self.spectra)
+
+
+async def counted_operands(request: Request, sent: SentOperands, k: int, cap_holes: bool = False) -> CountedOperands:
+    """The operands parsed and counted: at least one, at most ``MAX_OPERANDS``, and with
+    ``cap_holes`` exactly one uploaded scan (its holes capped before the solve)."""
+    counted = CountedOperands(sent, parse_spectra(sent.spectra, k))
+    files, count = sent.files, counted.count
     if count == 0:
         raise ProblemError(422, "invalid-request", "Invalid request", await _no_operand(request))
     if count > MAX_OPERANDS:
@@ -257,17 +260,25 @@ async def resolve_operands(
             "Invalid request",
             f"at most {MAX_OPERANDS} operands (files and spectra), got {count}",
         )
-    if cap_holes and (len(files) != 1 or given):
+    if cap_holes and (len(files) != 1 or counted.spectra):
         raise ProblemError(
             422,
             "invalid-request",
             "Invalid request",
-            f"cap_holes closes one uploaded scan of a whole body, got {len(files)} files and {len(given)} spectra: "
-            "the union operator reads partial scans by their boundary",
+            f"cap_holes closes one uploaded scan of a whole body, got {len(files)} files and "
+            f"{len(counted.spectra)} spectra: the union operator reads partial scans by their boundary",
         )
-    if check_count is not None:
-        check_count(count)
-    options = upload_options(settings, k, sent.units, sent.scale, cap_holes=cap_holes)
+    return counted
+
+
+async def resolve_operands(
+    request: Request, settings: Settings, counted: CountedOperands, k: int, wanted: Wanted = SPECTRA_ONLY
+) -> tuple[list[Operand], float]:
+    """Every operand's spectrum, uploaded files solved, and the milliseconds that took; ``wanted``
+    says what else each uploaded file's operand carries."""
+    sent = counted.sent
+    files = sent.files
+    options = upload_options(settings, k, sent.units, sent.scale, cap_holes=wanted.cap_holes)
     sources = [f"files[{index}] {upload.filename or ''}".strip() for index, upload in enumerate(files)]
     started = time.perf_counter()
     outcomes = await _solve_all(request, files, options, wanted)
@@ -281,7 +292,7 @@ async def resolve_operands(
         Operand(source, solved.report.eigenvalues, solved.report, solved.footprint, solved.part, solved.places)
         for source, solved in zip(sources, outcomes, strict=True)
     ]
-    operands += [Operand(f"spectra[{i}]", values, None) for i, values in enumerate(given)]
+    operands += [Operand(f"spectra[{i}]", values, None) for i, values in enumerate(counted.spectra)]
     return operands, solve_ms
 
 

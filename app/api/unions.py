@@ -1,24 +1,28 @@
 """The union of a request's operands, shared by every endpoint that reads one (union, localize,
-retrieve): operands resolved (uploads solved), folded through the union operator, timed, and
-the warnings collected. No response shaping here: the routes do that.
+reconstruct, retrieve): operands counted, then resolved (uploads solved), folded through the union
+operator, timed, and the warnings collected. Each of those routes takes one parameter for it
+(:data:`UnionDep`). No response shaping here: the routes do that.
 """
 
 import time
 from dataclasses import dataclass
-from typing import Literal
+from typing import Annotated, Literal
 
 import anyio
 import numpy as np
-from fastapi import Request
+from fastapi import Depends, Request
 
 from app.api import form_json
+from app.api.deps import ModelsDep, SettingsDep, ToldDep
 from app.api.metrics import INFERENCE
 from app.api.operands import (
     NOT_TOLD,
     Operand,
+    OperandsDep,
     SentOperands,
     Told,
     Wanted,
+    counted_operands,
     parse_shares,
     parse_spectra,
     resolve_operands,
@@ -98,10 +102,6 @@ async def union_of_operands(
     if told.measure:
         _check_measurable(overlaps, boundaries, spectra, models)
 
-    def check_overlaps(count: int) -> None:
-        checked_overlaps(overlaps, count, models.reads_overlap)
-        checked_boundaries(boundaries, overlaps, count, models.reads_boundary)
-
     carried = _carried_regions(told.regions, spectra, models)
     if carried is not None and files and models.correspondence is None:
         raise InvalidRegion("these models cannot place uploaded files: send regions with spectra operands only")
@@ -110,7 +110,10 @@ async def union_of_operands(
     places = models.correspondence is not None and bool(files) and only_placeable and (locate or steps)
     place_with = models.correspondence.path if places else None
     wanted = Wanted(footprints=told.measure, cap_holes=cap_holes, place_with=place_with)
-    operands, solve_ms = await resolve_operands(request, settings, sent, models.k, check_overlaps, wanted)
+    counted = await counted_operands(request, sent, models.k, cap_holes)
+    checked_overlaps(overlaps, counted.count, models.reads_overlap)
+    checked_boundaries(boundaries, overlaps, counted.count, models.reads_boundary)
+    operands, solve_ms = await resolve_operands(request, settings, counted, models.k, wanted)
     source: OverlapSource | None = "told" if overlaps is not None else None
     if told.measure:  # k-d trees of up to UNION_POINTS points per step: off the event loop
         footprints = [o.footprint for o in operands if o.footprint is not None]
@@ -206,3 +209,30 @@ def _check_measurable(
     if spectra is not None and spectra.strip():
         raise InvalidOverlap("measure_overlap measures uploaded files; spectra operands have no geometry to measure")
     require_overlap_reader(models.reads_overlap)
+
+
+@dataclass(frozen=True)
+class UnionRequest:
+    """What a union-based route was sent, solved when the route asks: after FastAPI has checked
+    the route's own parameters, so a malformed one is refused before any upload costs a solve."""
+
+    request: Request
+    settings: Settings
+    models: SpectralModels
+    told: Told
+    operands: SentOperands
+
+    async def solved(self, *, cap_holes: bool = False, locate: bool = False) -> UnionOutcome:
+        """The union of the operands (:func:`union_of_operands`)."""
+        return await union_of_operands(
+            self.request, self.settings, self.models, self.operands, self.told, cap_holes=cap_holes, locate=locate
+        )
+
+
+def union_request(
+    request: Request, settings: SettingsDep, models: ModelsDep, told: ToldDep, operands: OperandsDep
+) -> UnionRequest:
+    return UnionRequest(request, settings, models, told, operands)
+
+
+UnionDep = Annotated[UnionRequest, Depends(union_request)]

@@ -131,6 +131,27 @@ def test_an_overlap_count_that_does_not_fit_costs_no_solve(client, nested, templ
     assert _solves() == before + 2  # the count would have seen solves
 
 
+@pytest.mark.parametrize(
+    ("route", "params"),
+    [
+        ("/v1/retrieve", {"top": 0}),
+        ("/v1/localize", {"format": "xml"}),
+        ("/v1/reconstruct", {"format": "xml"}),
+        ("/v1/union", {"measure_overlap": "maybe"}),
+    ],
+)
+def test_a_malformed_route_parameter_costs_no_solve(client, template, route, params):  # noqa: F811
+    """Every union route takes its union as one dependency that solves only when the route asks,
+    after FastAPI has checked the route's own parameters: a malformed one is a 422 with the
+    uploads never solved."""
+    upload = ply_bytes(region(template, LEGS))
+    before = _solves()
+    response = client.post(route, params=params, files=[("files", ("a.ply", upload)), ("files", ("b.ply", upload))])
+    assert response.status_code == 422, response.text
+    assert response.headers["content-type"] == PROBLEM
+    assert _solves() == before
+
+
 def _solves() -> float:
     """Solves the service has recorded (its Prometheus histogram's count)."""
     return REGISTRY.get_sample_value("spectral_unions_solve_seconds_count") or 0.0

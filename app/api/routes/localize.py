@@ -5,15 +5,13 @@ from typing import Annotated, Literal
 
 import anyio
 import numpy as np
-from fastapi import APIRouter, Query, Request, Response
+from fastapi import APIRouter, Query, Response
 from pydantic import Field
 
-from app.api.deps import ModelsDep, SettingsDep, ToldDep
 from app.api.examples import success
 from app.api.metrics import INFERENCE
-from app.api.operands import OperandsDep
 from app.api.responses import UNION_PROBLEMS, UnionResponse
-from app.api.unions import union_of_operands
+from app.api.unions import UnionDep
 from app.inference.correspondence import region_token
 from app.inference.template import coloured_template
 
@@ -52,11 +50,7 @@ class LocalizeResponse(UnionResponse):
     },
 )
 async def localize(
-    request: Request,
-    settings: SettingsDep,
-    models: ModelsDep,
-    told: ToldDep,
-    operands: OperandsDep,
+    union: UnionDep,
     format: Annotated[
         Literal["json", "ply"], Query(description="ply: the template mesh with the region as vertex colours.")
     ] = "json",
@@ -65,7 +59,8 @@ async def localize(
     covers: for uploaded parts, the union of the regions their vertices are placed on (the
     correspondence model); for spectra, the localizer's region of the union, as large as its
     probabilities expect, grown to hold each operand's own region."""
-    outcome = await union_of_operands(request, settings, models, operands, told, locate=True)
+    models = union.models
+    outcome = await union.solved(locate=True)
     confidence = None
     if outcome.regions is not None:
         region, confidence = await anyio.to_thread.run_sync(models.placed_region, outcome.regions, outcome.placed)

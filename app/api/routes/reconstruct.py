@@ -19,19 +19,15 @@ network's best guess of the person); the gap between the two spectra shows it.
 from typing import Annotated, Literal
 
 import numpy as np
-from fastapi import APIRouter, Query, Request, Response
+from fastapi import APIRouter, Query, Response
 from pydantic import Field
 
-from app.api.deps import ModelsDep, SettingsDep, ToldDep
 from app.api.examples import success
-from app.api.operands import (
-    CapHolesQuery,
-    OperandsDep,
-)
+from app.api.operands import CapHolesQuery
 from app.api.problems import ProblemError, problem_responses
 from app.api.rebuilt import RoundTrip, rebuilt_body
 from app.api.responses import UNION_PROBLEMS, UnionResponse
-from app.api.unions import union_of_operands
+from app.api.unions import UnionDep
 from app.inference.body import body_height, surface_area
 
 router = APIRouter(tags=["unions"])
@@ -86,11 +82,7 @@ def round_trip_warnings(verdict: RoundTrip, gap: float) -> list[str]:
     },
 )
 async def reconstruct(
-    request: Request,
-    settings: SettingsDep,
-    models: ModelsDep,
-    told: ToldDep,
-    operands: OperandsDep,
+    union: UnionDep,
     cap_holes: CapHolesQuery = False,
     format: Annotated[
         Literal["json", "ply"],
@@ -101,12 +93,13 @@ async def reconstruct(
     ] = "json",
 ) -> ReconstructResponse | Response:
     """The complete body of the person the operands were scanned from, in the rest pose, up to pose."""
+    models = union.models
     if models.decoder_session is None:
         raise ProblemError(
             501, "reconstruction-unavailable", "Reconstruction unavailable", "these models have no shape decoder"
         )
-    outcome = await union_of_operands(request, settings, models, operands, told, cap_holes=cap_holes)
-    body = await rebuilt_body(request, models, outcome.result)
+    outcome = await union.solved(cap_holes=cap_holes)
+    body = await rebuilt_body(union.request, models, outcome.result)
     height, area = body_height(body.vertices), surface_area(body.vertices, models.template.faces)
     warnings = [*outcome.warnings, *round_trip_warnings(body.verdict, body.gap)]
     if format == "ply":

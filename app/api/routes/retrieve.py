@@ -25,15 +25,12 @@ import numpy as np
 from fastapi import APIRouter, Query, Request
 from pydantic import BaseModel, Field
 
-from app.api.deps import ModelsDep, SettingsDep, StoreDep, ToldDep
+from app.api.deps import StoreDep
 from app.api.examples import success
-from app.api.operands import (
-    CapHolesQuery,
-    OperandsDep,
-)
+from app.api.operands import CapHolesQuery
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.api.rebuilt import RebuiltBody, rebuilt_body
-from app.api.unions import UnionOutcome, union_of_operands
+from app.api.unions import UnionDep, UnionOutcome
 from app.contract import PROFILE_SHARES
 from app.inference.body import open_surface
 from app.inference.models import SpectralModels
@@ -146,12 +143,8 @@ async def ranked(
     responses=RETRIEVE_RESPONSES,
 )
 async def retrieve(
-    request: Request,
-    settings: SettingsDep,
-    models: ModelsDep,
-    told: ToldDep,
+    union: UnionDep,
     store: StoreDep,
-    operands: OperandsDep,
     top: Annotated[int, Query(ge=1, le=MAX_TOP, description="Number of matches.")] = 10,
     rebuild: Annotated[
         bool,
@@ -171,8 +164,9 @@ async def retrieve(
 ) -> RetrieveResponse:
     """The stored complete shapes nearest to the union of the operands (an open one through its rebuilt body,
     two operands whose overlap is not told by their share profile)."""
-    outcome = await union_of_operands(request, settings, models, operands, told, cap_holes=cap_holes)
-    looked_up, ranked_by, notes = await looked_up_spectra(request, models, outcome, rebuild, profile)
+    models = union.models
+    outcome = await union.solved(cap_holes=cap_holes)
+    looked_up, ranked_by, notes = await looked_up_spectra(union.request, models, outcome, rebuild, profile)
     matches, first = await ranked(store, looked_up, ranked_by, top)
     return RetrieveResponse(
         query=outcome.result.eigenvalues.tolist(),

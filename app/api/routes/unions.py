@@ -4,13 +4,11 @@ Operands are uploaded files and/or spectra (see :mod:`app.api.operands`), in 1/m
 more than two operands is folded left to right, exactly as the operator was trained to chain.
 """
 
-from fastapi import APIRouter, Request
+from fastapi import APIRouter
 
-from app.api.deps import ModelsDep, SettingsDep, ToldDep
 from app.api.examples import success
-from app.api.operands import OperandsDep
 from app.api.responses import UNION_PROBLEMS, UnionResponse
-from app.api.unions import union_of_operands
+from app.api.unions import UnionDep
 
 router = APIRouter(tags=["unions"])
 
@@ -20,17 +18,11 @@ router = APIRouter(tags=["unions"])
     response_model=UnionResponse,
     responses={**UNION_PROBLEMS, **success("union")},
 )
-async def union(
-    request: Request,
-    settings: SettingsDep,
-    models: ModelsDep,
-    told: ToldDep,
-    operands: OperandsDep,
-) -> UnionResponse:
+async def union(union: UnionDep) -> UnionResponse:
     """Spectrum of the union of partial scans of one body, with a 90 % interval.
 
     Two or more operands fold left to right, ((A ∪ B) ∪ C) ∪ …; one operand is returned as is
     (σ = 0). The result is exactly the same whichever order two operands come in.
     """
-    outcome = await union_of_operands(request, settings, models, operands, told)
-    return UnionResponse(**outcome.fields(models))
+    outcome = await union.solved()
+    return UnionResponse(**outcome.fields(union.models))
