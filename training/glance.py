@@ -11,20 +11,16 @@ import json
 from collections.abc import Callable
 from pathlib import Path
 
-from training.learning.card import replace_block
+from training.learning.card import percent, replace_block
 
 BEGIN, END = "<!-- glance:begin -->", "<!-- glance:end -->"
 CARD = "MODEL_CARD.md"
 Row = tuple[str, str, str, bool | None]  # what, measured, goal, met (None: no goal)
 
 
-def _percent(x: float) -> str:
-    return f"{100 * x:.1f} %"
-
-
 def _span(values: list[float]) -> str:
     low, high = min(values), max(values)
-    return _percent(low) if round(100 * low, 1) == round(100 * high, 1) else f"{100 * low:.1f}–{100 * high:.1f} %"
+    return percent(low) if round(100 * low, 1) == round(100 * high, 1) else f"{100 * low:.1f}–{100 * high:.1f} %"
 
 
 def _both(metrics: dict, key: str) -> tuple[float, float]:
@@ -37,7 +33,7 @@ def same_region_row(metrics: dict) -> Row:
     same = [_both(metrics, f"test_c/same_region/{v}") for v in ("mesh", "remeshed")]
     return (
         "U(A, A′): one region in another pose / meshing (Test C), untold; told",
-        f"{_percent(same[0][0])} / {_percent(same[1][0])}; {_percent(same[0][1])} / {_percent(same[1][1])}",
+        f"{percent(same[0][0])} / {percent(same[1][0])}; {percent(same[0][1])} / {percent(same[1][1])}",
         "≤ 2 %",
         max(told for _, told in same) <= 0.02,
     )
@@ -48,8 +44,8 @@ def nested_row(metrics: dict) -> Row:
     floor = [metrics["strata"][f"test_c/nested/{v}"]["union"]["elementwise_min"]["mre"] for v in ("mesh", "remeshed")]
     return (
         "nested pairs (Test C mesh / re-meshed), untold; told",
-        f"{_percent(nested[0][0])} / {_percent(nested[1][0])}; {_percent(nested[0][1])} / {_percent(nested[1][1])}",
-        f"≤ the elementwise minimum ({_percent(floor[0])} / {_percent(floor[1])})",
+        f"{percent(nested[0][0])} / {percent(nested[1][0])}; {percent(nested[0][1])} / {percent(nested[1][1])}",
+        f"≤ the elementwise minimum ({percent(floor[0])} / {percent(floor[1])})",
         all(n[1] <= f for n, f in zip(nested, floor, strict=True)),
     )
 
@@ -58,7 +54,7 @@ def shared_row(metrics: dict) -> Row:
     shares = [_both(metrics, f"test_c/{s}/mesh") for s in ("over_75", "25_to_75", "under_25")]
     return (
         "Test C > 75 / 25–75 / < 25 % shared (mesh), untold; told",
-        " / ".join(_percent(u) for u, _ in shares) + "; " + " / ".join(_percent(t) for _, t in shares),
+        " / ".join(percent(u) for u, _ in shares) + "; " + " / ".join(percent(t) for _, t in shares),
         "≤ 10 %",
         all(t <= 0.10 for _, t in shares),
     )
@@ -91,9 +87,9 @@ def sessions_row(metrics: dict) -> Row:
     lengths = [n for n in chains if n != "associativity"]
     return (
         f"sessions of {' / '.join(lengths)} camera views, untold; told each step",
-        " / ".join(_percent(chains[n]["union"]["operator"]["mre"]) for n in lengths)
+        " / ".join(percent(chains[n]["union"]["operator"]["mre"]) for n in lengths)
         + "; "
-        + " / ".join(_percent(chains[n]["union"]["operator_told_boundary"]["mre"]) for n in lengths),
+        + " / ".join(percent(chains[n]["union"]["operator_told_boundary"]["mre"]) for n in lengths),
         "—",
         None,
     )
@@ -122,9 +118,9 @@ def identity_row(metrics: dict) -> Row:
     retrieval = metrics["retrieval"]
     return (
         "identity top-1 from two parts covering the body, untold (share profile); told",
-        f"{_percent(retrieval['operator_union_share_profile']['top1'])}; "
-        f"{_percent(retrieval['operator_union_told']['top1'])}",
-        f"≥ 85 % (complete shapes: {_percent(retrieval['shapedna_complete']['top1'])})",
+        f"{percent(retrieval['operator_union_share_profile']['top1'])}; "
+        f"{percent(retrieval['operator_union_told']['top1'])}",
+        f"≥ 85 % (complete shapes: {percent(retrieval['shapedna_complete']['top1'])})",
         retrieval["operator_union_told"]["top1"] >= 0.85,
     )
 
@@ -148,15 +144,15 @@ def camera_region_row(metrics: dict) -> Row:
     camera = [parts[v]["iou"] for v in ("mesh", "remeshed", "cloud")]
     return (
         "uploaded camera view's region (Test C mesh / re-meshed / cloud, IoU)",
-        " / ".join(_percent(x) for x in camera),
-        f"≥ 85 % (the whole body: {_percent(parts['mesh']['whole_body_iou'])})",
+        " / ".join(percent(x) for x in camera),
+        f"≥ 85 % (the whole body: {percent(parts['mesh']['whole_body_iou'])})",
         min(camera) >= 0.85,
     )
 
 
 def random_region_row(metrics: dict) -> Row:
     iou = metrics["parts"]["test_b"]["mesh"]["iou"]
-    return ("uploaded random region's region (Test B mesh, IoU)", _percent(iou), "≥ 85 %", iou >= 0.85)
+    return ("uploaded random region's region (Test B mesh, IoU)", percent(iou), "≥ 85 %", iou >= 0.85)
 
 
 def part_coverage_row(metrics: dict) -> Row:
@@ -168,7 +164,7 @@ def session_pair_row(metrics: dict) -> Row:
     session = metrics["pairs"]["sets"]["pairs_c"]["all"]
     return (
         "a session's two views: overlap error; union as served (told the truth)",
-        f"{session['overlap_error']:.3f}; {_percent(session['served'])} ({_percent(session['told_truth'])})",
+        f"{session['overlap_error']:.3f}; {percent(session['served'])} ({percent(session['told_truth'])})",
         "≤ 0.08; within 1 point of told the truth",
         session["overlap_error"] <= 0.08 and session["served"] - session["told_truth"] <= 0.01,
     )
