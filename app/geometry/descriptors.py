@@ -60,8 +60,8 @@ def mesh_inputs(
     """Inputs of a prepared mesh (``app.geometry.validate.prepare_mesh``), in metres;
     ``operators``: its Laplacian when the spectrum's solve already built it (winding does not
     change it)."""
-    faces = outward_faces(vertices, faces)
     operators = operators or mesh_operators(vertices, faces)
+    faces = outward_faces(vertices, faces, operators.stiffness)
     stencil = gradient_stencil(
         vertices, vertex_normals(vertices, faces), mesh_neighbours(faces, len(vertices), vertices)
     )
@@ -74,10 +74,11 @@ def cloud_inputs(
 ) -> PartInputs:
     """Inputs of a prepared point cloud, in metres; ``boundary`` flags its boundary points;
     ``operators``: its Laplacian when the spectrum's solve already built it."""
+    operators = operators or point_cloud_operators(points)
     neighbours = cloud_neighbours(points)
-    stencil = gradient_stencil(points, cloud_normals(points, neighbours), neighbours)
+    stencil = gradient_stencil(points, cloud_normals(points, neighbours, operators.stiffness), neighbours)
     flags = np.zeros(len(points), bool) if boundary is None else boundary
-    return replace(_inputs(operators or point_cloud_operators(points), flags, stencil, k), points=points)
+    return replace(_inputs(operators, flags, stencil, k), points=points)
 
 
 def _inputs(operators: Operators, boundary: np.ndarray, stencil: GradientStencil, k: int) -> PartInputs:

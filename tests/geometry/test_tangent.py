@@ -1,9 +1,12 @@
 """Tangent-plane gradients, outward winding and cloud normals against analytic truths."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from app.geometry.laplacian import mesh_operators, point_cloud_operators
 from app.geometry.tangent import (
     cloud_neighbours,
     cloud_normals,
@@ -13,7 +16,8 @@ from app.geometry.tangent import (
     outward_faces,
     vertex_normals,
 )
-from app.geometry.topology import boundary_vertex_mask
+from app.geometry.topology import boundary_vertex_mask, drop_unreferenced, largest_component
+from app.inference.template import Template
 from tests.conftest import bumpy_patch, disk, grid, sphere
 
 
@@ -62,8 +66,9 @@ def test_outward_faces_turn_an_inward_part_and_keep_an_outward_one(make):
     mesh = make()
     vertices = mesh.vertices.copy()
     vertices[:, 2] += 0.2 * (1 - (vertices[:, :2] ** 2).sum(axis=1))  # a dome: its outside is up
-    outward = outward_faces(vertices, mesh.faces)
-    np.testing.assert_array_equal(outward_faces(vertices, mesh.faces[:, ::-1]), outward)
+    stiffness = mesh_operators(vertices, mesh.faces).stiffness
+    outward = outward_faces(vertices, mesh.faces, stiffness)
+    np.testing.assert_array_equal(outward_faces(vertices, mesh.faces[:, ::-1], stiffness), outward)
     centre = vertices.mean(axis=0)
     normals = vertex_normals(vertices, outward)
     assert np.mean(np.einsum("ij,ij->i", normals, vertices - centre + [0, 0, 1e-3]) > 0) > 0.9
@@ -74,7 +79,7 @@ def test_a_soup_with_flipped_faces_is_wound_consistently():
     faces = mesh.faces.copy()
     faces[::3] = faces[::3, ::-1]
     assert not consistently_wound(faces)
-    mended = outward_faces(mesh.vertices, faces)
+    mended = outward_faces(mesh.vertices, faces, mesh_operators(mesh.vertices, mesh.faces).stiffness)
     assert consistently_wound(mended)
     normals = vertex_normals(mesh.vertices, mended)
     assert np.all(np.einsum("ij,ij->i", normals, mesh.vertices) > 0)
@@ -82,8 +87,46 @@ def test_a_soup_with_flipped_faces_is_wound_consistently():
 
 def test_cloud_normals_of_a_sphere_point_outward():
     points = sphere(3).vertices
-    normals = cloud_normals(points, cloud_neighbours(points))
+    normals = cloud_normals(points, cloud_neighbours(points), point_cloud_operators(points).stiffness)
     np.testing.assert_allclose(np.einsum("ij,ij->i", normals, points), 1.0, atol=0.02)
+
+
+TEMPLATE = Template.load(Path(__file__).resolve().parents[2] / "models")
+VIEWS = [(0, -1, 0), (0, 1, 0), (1, 0, 0), (-1, 0, 0), (0.6, -0.8, 0.3), (-0.5, 0.5, -0.7)]
+
+
+def _view_of_the_template(direction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What a camera far along ``direction`` roughly sees of the template body (faces facing it,
+    the largest piece): vertices, faces wound as the body's, and each vertex's outward normal
+    as the closed body gives it."""
+    vertices, faces = TEMPLATE.vertices, TEMPLATE.faces
+    a, b, c = (vertices[faces[:, i]] for i in range(3))
+    facing = np.cross(b - a, c - a) @ np.asarray(direction, float) > 0
+    kept, _ = largest_component(vertices, faces[facing])
+    normals = vertex_normals(vertices, faces)
+    used = np.unique(kept)
+    view, view_faces = drop_unreferenced(vertices, kept)
+    return view, view_faces, normals[used]
+
+
+def test_the_template_body_is_wound_outward():
+    """The truth the views below are held to: the closed template encloses a positive volume."""
+    a, b, c = (TEMPLATE.vertices[TEMPLATE.faces[:, i]] for i in range(3))
+    assert np.einsum("ij,ij->i", a, np.cross(b, c)).sum() > 0
+
+
+@pytest.mark.parametrize("direction", VIEWS)
+def test_a_camera_view_of_a_body_faces_outward_as_a_mesh_and_as_a_cloud(direction):
+    """An open view of a body, either winding, and its vertices as a point cloud: every normal
+    points to the side the body's own outward normals do (a view's side "away from its
+    centroid" is wrong for most views of a standing body)."""
+    vertices, faces, truth = _view_of_the_template(direction)
+    stiffness = mesh_operators(vertices, faces).stiffness
+    for wound in (faces, faces[:, ::-1]):
+        normals = vertex_normals(vertices, outward_faces(vertices, wound, stiffness))
+        assert np.mean(np.einsum("ij,ij->i", normals, truth) > 0) > 0.99
+    normals = cloud_normals(vertices, cloud_neighbours(vertices), point_cloud_operators(vertices).stiffness)
+    assert np.mean(np.einsum("ij,ij->i", normals, truth) > 0) > 0.95
 
 
 def test_a_wide_one_ring_is_cut_to_its_nearest_members():
