@@ -5,6 +5,7 @@ import copy
 import json
 from pathlib import Path
 
+from training.correspondence import card as correspondence_card
 from training.glance import BEGIN as GLANCE_BEGIN
 from training.glance import END as GLANCE_END
 from training.glance import render_glance, same_region_row, unseen_types_row
@@ -27,6 +28,12 @@ def test_the_cards_generated_sections_are_what_the_metrics_give():
     section = block(CARD, BEGIN, END)
     assert section == render_summary(METRICS, command_of(section))
     assert block(CARD, GLANCE_BEGIN, GLANCE_END) == render_glance(MODELS)
+
+
+def test_the_correspondence_section_is_what_its_metrics_give():
+    section = block(CARD, correspondence_card.BEGIN, correspondence_card.END)
+    metrics = json.loads((MODELS / "correspondence.json").read_text())
+    assert section == correspondence_card.render(metrics, command_of(section))
 
 
 def test_every_table_of_the_evaluation_is_what_the_metrics_give():

@@ -9,7 +9,8 @@ regions; C: unseen identities, camera views) and per variant (mesh, re-meshed, p
   every vertex (what an uninformed regression shrinks to);
 - left/right flips: parts whose places lie nearer the mirror image of the truth than the truth;
 - region IoU (area-weighted, plain and mirror-allowed) of the reached region against the true
-  one, beside the whole body (IoU = the true area share) and the spectral localizer;
+  one, beside the whole body (IoU = the true area share), the spectral localizer, and the same
+  region rule fed each vertex's true place (the most the rule can reach with perfect places);
 - part-coverage error: mean absolute difference (points) of the 16 body parts' covered shares.
 
 Pairs of parts of one person (:mod:`training.correspondence.pairs`): the overlap measured from
@@ -47,6 +48,7 @@ class PartScore:
     flipped: bool
     iou: float
     iou_mirror: float
+    true_places_iou: float
     whole_body_iou: float
     localizer_iou: float
     localizer_iou_mirror: float
@@ -69,17 +71,19 @@ def score_part(
     region: np.ndarray,
     truth: np.ndarray,
     localized: np.ndarray,
+    perfect: np.ndarray,
     template: Template,
     vertex_area: np.ndarray,
 ) -> PartScore:
-    """One part's figures (see the module docstring)."""
+    """One part's figures (see the module docstring); ``perfect``: the region the rule reads
+    from the part's true places."""
     rest = template.vertices
     weight = part["mass"] / part["mass"].sum()
     target = part["target"]
     error = np.linalg.norm(placement.position - rest[target], axis=1)
     mirrored = np.linalg.norm(placement.position - rest[template.mirror[target]], axis=1)
     centroid = (vertex_area @ rest) / vertex_area.sum()
-    plain, mirror = region_scores(np.stack([region, localized]), truth, template, vertex_area)
+    plain, mirror = region_scores(np.stack([region, localized, perfect]), truth, template, vertex_area)
     return PartScore(
         error_cm=100 * float(weight @ error),
         within_5=float(weight @ (error <= 0.05)),
@@ -88,6 +92,7 @@ def score_part(
         flipped=bool(weight @ mirrored < weight @ error),
         iou=float(plain.iou[0]),
         iou_mirror=float(mirror.iou[0]),
+        true_places_iou=float(plain.iou[2]),
         whole_body_iou=float(vertex_area[truth].sum() / vertex_area.sum()),
         localizer_iou=float(plain.iou[1]),
         localizer_iou_mirror=float(mirror.iou[1]),
@@ -116,8 +121,9 @@ def evaluate_correspondence(parts_dir: Path, graph: Path, models: Path) -> dict:
             localized = served.localize(spectrum).vertices if np.isfinite(spectrum).all() else np.arange(n)
             localized_mask = np.zeros(n, bool)
             localized_mask[localized] = True
+            perfect = model.regions.covered(part["target"], placement.area)
             rows[str(part["variant"])].append(
-                score_part(part, placement, region, truth, localized_mask, template, served.vertex_area)
+                score_part(part, placement, region, truth, localized_mask, perfect, template, served.vertex_area)
             )
         table[name] = {variant: _mean(scores) for variant, scores in rows.items() if scores}
     return table
