@@ -64,3 +64,17 @@ def test_a_figure_the_metrics_do_not_hold_leaves_its_row_out(tmp_path):
     assert unseen_types_row(METRICS)[0] not in table and "Test B" not in table
     assert "U(A, A′)" in table  # the rows whose figures are there stay
     assert "uploaded camera view" not in table  # no correspondence.json in this folder
+
+
+def test_a_camera_view_goal_is_met_only_when_every_delivery_meets_it():
+    metrics = json.loads((MODELS / "correspondence.json").read_text())
+    for row in metrics["parts"]["test_c"].values():
+        row["iou"] = 0.86
+    assert "| part IoU ≥ 85 % (every C delivery) | 86.0 % / 86.0 % / 86.0 % (mesh / remeshed / cloud) | yes |" in (
+        correspondence_card.goals(metrics)
+    )
+    metrics["parts"]["test_c"]["cloud"]["iou"] = 0.849
+    assert any(
+        line.startswith("| part IoU ≥ 85 % (every C delivery)") and line.endswith("| **no** |")
+        for line in correspondence_card.goals(metrics)
+    )
