@@ -1,13 +1,18 @@
-"""What the correspondence network reads of one part: its own eigenbasis, mass, intrinsic
-features and gradient stencils, computed by the engine that computes its spectrum.
+"""What the correspondence network reads of one part: its own eigenbasis, mass, features and
+gradient stencils, computed by the engine that computes its spectrum.
 
-Everything here is intrinsic or oriented by the part itself, so neither the file's frame nor
-the body's pose changes it: the eigenbasis is the part's free-boundary (Neumann) Laplacian's
-(its low frequencies are where the network diffuses features), the features are the heat
-kernel signature of that basis, made dimensionless (4πt·HKS(x, t) → 1 on a flat patch as
-t → 0) and logged, plus a flag for the part's boundary (where a scan stops, not where the body
-does), and the stencils take gradients in each vertex's tangent plane with the normal turned
-outward (:mod:`app.geometry.tangent`). Units are metres, as for every spectrum.
+Nothing here depends on the file's frame, and little on the body's pose: the eigenbasis is
+the part's free-boundary (Neumann) Laplacian's (its low frequencies are where the network
+diffuses features), the features are the heat kernel signature of that basis, made
+dimensionless (4πt·HKS(x, t) → 1 on a flat patch as t → 0) and logged, the signed mean
+curvature with the normal outward, and a flag for the part's boundary (where a scan stops, not
+where the body does); the stencils take gradients in each vertex's tangent plane with the
+normal turned outward (:mod:`app.geometry.tangent`). Units are metres, as for every spectrum.
+
+The mean curvature is the one input that is not intrinsic, and it is there because a camera
+sees half of a limb: a half-cylinder is intrinsically a flat strip, so nothing intrinsic tells a
+forearm's view from a patch of the back, where its bend (1/2r: ~12/m on an arm, ~5/m on the
+trunk) does at once. It is unchanged by the file's frame and, away from the joints, by the pose.
 """
 
 from dataclasses import dataclass, replace
@@ -28,7 +33,8 @@ from app.geometry.tangent import (
 )
 from app.geometry.topology import boundary_vertex_mask
 
-FEATURES = len(HKS_TIMES) + 1  # the HKS at each time, and the boundary flag
+FEATURES = len(HKS_TIMES) + 2  # the HKS at each time, the mean curvature, the boundary flag
+CURVATURE_SCALE_M = 0.05  # mean curvature read as asinh(H · 5 cm): ~linear up to a wrist's bend, a finger's ~2
 
 
 @dataclass(frozen=True)
@@ -62,10 +68,10 @@ def mesh_inputs(
     change it)."""
     operators = operators or mesh_operators(vertices, faces)
     faces = outward_faces(vertices, faces, operators.stiffness)
-    stencil = gradient_stencil(
-        vertices, vertex_normals(vertices, faces), mesh_neighbours(faces, len(vertices), vertices)
-    )
-    inputs = _inputs(operators, boundary_vertex_mask(faces, len(vertices)), stencil, k)
+    normals = vertex_normals(vertices, faces)
+    stencil = gradient_stencil(vertices, normals, mesh_neighbours(faces, len(vertices), vertices))
+    curvature = mean_curvature(vertices, normals, operators)
+    inputs = _inputs(operators, curvature, boundary_vertex_mask(faces, len(vertices)), stencil, k)
     return replace(inputs, points=vertices, faces=faces)
 
 
@@ -76,16 +82,21 @@ def cloud_inputs(
     ``operators``: its Laplacian when the spectrum's solve already built it."""
     operators = operators or point_cloud_operators(points)
     neighbours = cloud_neighbours(points)
-    stencil = gradient_stencil(points, cloud_normals(points, neighbours, operators.stiffness), neighbours)
+    normals = cloud_normals(points, neighbours, operators.stiffness)
+    stencil = gradient_stencil(points, normals, neighbours)
     flags = np.zeros(len(points), bool) if boundary is None else boundary
-    return replace(_inputs(operators, flags, stencil, k), points=points)
+    curvature = mean_curvature(points, normals, operators)
+    return replace(_inputs(operators, curvature, flags, stencil, k), points=points)
 
 
-def _inputs(operators: Operators, boundary: np.ndarray, stencil: GradientStencil, k: int) -> PartInputs:
+def _inputs(
+    operators: Operators, curvature: np.ndarray, boundary: np.ndarray, stencil: GradientStencil, k: int
+) -> PartInputs:
     k = min(k, operators.mass.shape[0] - 1)
     values, basis = eigenpairs(operators, k, None, vectors=True)
     values = np.maximum(values, 0.0)
-    features = np.column_stack([heat_signature(values, basis), boundary.astype(np.float64)])
+    bend = np.arcsinh(curvature * CURVATURE_SCALE_M)
+    features = np.column_stack([heat_signature(values, basis), bend, boundary.astype(np.float64)])
     return PartInputs(
         features.astype(np.float32),
         operators.mass.diagonal().astype(np.float32),
@@ -93,6 +104,15 @@ def _inputs(operators: Operators, boundary: np.ndarray, stencil: GradientStencil
         values.astype(np.float32),
         stencil,
     )
+
+
+def mean_curvature(points: np.ndarray, normals: np.ndarray, operators: Operators) -> np.ndarray:
+    """(n,) signed mean curvature H (1/m) at each point, positive where the surface bends away
+    from its ``normals``: S·X = M·2H·n for the positive semi-definite stiffness, read along the
+    normal (at a boundary point, where the ring is cut, what remains of it)."""
+    mass = operators.mass.diagonal()
+    bend = np.einsum("ij,ij->i", normals, operators.stiffness @ points)
+    return np.divide(bend, 2.0 * mass, out=np.zeros_like(bend), where=mass > 0)
 
 
 def heat_signature(values: np.ndarray, basis: np.ndarray) -> np.ndarray:

@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 
 from app.contract import CORRESPONDENCE_INPUTS
 from app.core.errors import InputError
-from app.geometry.descriptors import PartInputs, Places
+from app.geometry.descriptors import FEATURES, PartInputs, Places
 from app.geometry.laplacian import Operators
 from app.inference.template import RegionBoundaries, Template
 
@@ -168,6 +168,9 @@ class PlacingGraph:
         names = tuple(node.name for node in self.session.get_inputs())
         if names != CORRESPONDENCE_INPUTS:
             raise ValueError(f"the correspondence graph reads {names}, not {CORRESPONDENCE_INPUTS}")
+        width = self.session.get_inputs()[0].shape[1]
+        if width != FEATURES:  # a graph trained on other features would answer, wrongly
+            raise ValueError(f"the correspondence graph reads {width} features, the engine computes {FEATURES}")
         metadata = self.session.get_modelmeta().custom_metadata_map
         self.tell_below = float(metadata.get(TELL_BELOW_KEY, 0.0))
 

@@ -55,3 +55,14 @@ def test_a_template_part_lands_near_itself_mesh_or_cloud(models):
         assert np.mean(np.linalg.norm(placement.position - truth, axis=1) < 0.10) > 0.8
     region = models.region_of(models.correspondence.region(models.correspondence.place(mesh_inputs(vertices, faces))))
     assert region.part_coverage["torso"] > 0.7 and region.part_coverage["head"] < 0.2
+
+
+def test_a_graph_trained_on_other_features_is_refused(monkeypatch):
+    """The engine computing one feature more than the graph was trained on (a model file older
+    than the code): the graph is refused at load, not fed columns it would misread."""
+    import app.inference.correspondence as correspondence
+
+    correspondence.PlacingGraph(MODELS / CORRESPONDENCE_FILE)
+    monkeypatch.setattr(correspondence, "FEATURES", correspondence.FEATURES + 1)
+    with pytest.raises(ValueError, match="features"):
+        correspondence.PlacingGraph(MODELS / CORRESPONDENCE_FILE)

@@ -143,7 +143,7 @@ def _cycle(
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
         optimizer.step()
         schedule.step()
-        losses.append((float(classification), float(place)))
+        losses.append((float(classification.detach()), float(place.detach())))
         if (step + 1) % every == 0:
             recent = np.mean(losses[-every:], axis=0)
             log(

@@ -2,6 +2,7 @@
 PyTorch on parts of other sizes than the one it was traced on (no anny: an irregular curved
 patch, with no symmetry to hide a place, is the template)."""
 
+import copy
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,7 @@ from tests.conftest import bumpy_patch  # noqa: E402
 from training.correspondence.export import correspondence_parity, export_correspondence  # noqa: E402
 from training.correspondence.net import CorrespondenceConfig, stencil_matrices  # noqa: E402
 from training.correspondence.train import TrainingPreset, restored, torch_inputs, train  # noqa: E402
+from training.onnx_export import relative_difference  # noqa: E402
 
 CONFIG = CorrespondenceConfig(width=16, blocks=2, patches=24, neighbourhood_m=0.2, offset_m=0.05)
 
@@ -65,7 +67,23 @@ def test_it_learns_and_its_graph_matches_pytorch_on_other_parts(tmp_path):
     model = restored(checkpoint)
     parts = [dict(np.load(path)) for path in sorted((parts_dir / "parts").glob("*.npz"))]
     export_correspondence(model, parts[0], tmp_path / "correspondence.onnx")
-    assert correspondence_parity(model, tmp_path / "correspondence.onnx", parts[1:]) < 1e-4
+    graph_error = correspondence_parity(model, tmp_path / "correspondence.onnx", parts[1:])
+    assert graph_error < 2 * float32_error(model, parts[1:]) and graph_error < 1e-3
+
+
+def float32_error(model, parts: list[dict[str, np.ndarray]]) -> float:
+    """How far the network itself, run in float32 as trained, is from its float64 answer: the
+    rounding the exported graph (float32 too) cannot be asked to beat."""
+    exact = copy.deepcopy(model).double()
+    worst = 0.0
+    for part in parts:
+        inputs = torch_inputs(part)
+        doubled = [x.double() if x.is_floating_point() else x for x in inputs]
+        with torch.no_grad():
+            single = model.place(model.heads(*inputs, stencil_matrices(inputs[4], inputs[5])))
+            expected = exact.place(exact.heads(*doubled, stencil_matrices(doubled[4], doubled[5])))
+        worst = max(worst, *(relative_difference(s.numpy(), e.numpy()) for s, e in zip(single, expected, strict=True)))
+    return worst
 
 
 def test_a_run_continued_after_its_first_cycle_ends_where_one_run_would(tmp_path):
