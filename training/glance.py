@@ -161,12 +161,18 @@ def part_coverage_row(metrics: dict) -> Row:
 
 
 def session_pair_row(metrics: dict) -> Row:
-    session = metrics["pairs"]["sets"]["pairs_c"]["all"]
+    """Judged as the goal is set: the union within a point of told the truth on every kind of a
+    session's pairs and on Test B's, not on their mean alone."""
+    sets = metrics["pairs"]["sets"]
+    session = sets["pairs_c"]["all"]
+    kinds = [row for kind, row in sets["pairs_c"].items() if kind != "all"] + [sets["pairs_b"]["all"]]
+    gap = max(row["served"] - row["told_truth"] for row in kinds)
     return (
-        "a session's two views: overlap error; union as served (told the truth)",
-        f"{session['overlap_error']:.3f}; {percent(session['served'])} ({percent(session['told_truth'])})",
-        "≤ 0.08; within 1 point of told the truth",
-        session["overlap_error"] <= 0.08 and session["served"] - session["told_truth"] <= 0.01,
+        "a session's two views: overlap error; union as served (told the truth; worst kind's gap)",
+        f"{session['overlap_error']:.3f}; {percent(session['served'])} ({percent(session['told_truth'])}; "
+        f"{100 * gap:.1f} points)",
+        "≤ 0.08; within 1 point of told the truth, every kind and Test B",
+        session["overlap_error"] <= 0.08 and gap <= 0.01,
     )
 
 
