@@ -12,7 +12,7 @@ import numpy as np
 import torch
 
 from app.contract import CORRESPONDENCE_INPUTS, CORRESPONDENCE_OUTPUTS
-from training.correspondence.net import CorrespondenceNet
+from training.correspondence.net import CorrespondenceNet, stencil_matrices
 from training.onnx_export import export_graph, relative_difference, session
 
 
@@ -38,16 +38,21 @@ def correspondence_parity(model: CorrespondenceNet, path: Path, parts: list[dict
     between onnxruntime and the network's exact answer over ``parts``: the training path (sparse
     stencil) in float64. Against the training path in float32 the difference is mostly that
     path's own rounding (on the test's network: 2.1e-4 from float64 where the graph is 1.3e-4)."""
-    from training.correspondence.net import stencil_matrices
-
     graph = session(path)
     exact = copy.deepcopy(model).double().eval()
     worst = 0.0
     for part in parts:
-        inputs = [torch.as_tensor(part[name]) for name in CORRESPONDENCE_INPUTS]
-        inputs = [x.double() if x.is_floating_point() else x for x in inputs]
-        with torch.no_grad():
-            expected = exact.place(exact.heads(*inputs, stencil_matrices(inputs[4], inputs[5])))
         got = graph.run(None, {name: part[name] for name in CORRESPONDENCE_INPUTS})
-        worst = max(worst, *(relative_difference(g, e.numpy()) for g, e in zip(got, expected, strict=True)))
+        expected = training_path(exact, part)
+        worst = max(worst, *(relative_difference(g, e) for g, e in zip(got, expected, strict=True)))
     return worst
+
+
+def training_path(model: CorrespondenceNet, part: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The network's (place, confidence) of one part by its training path (sparse stencil), its
+    inputs cast to the network's own precision (float32 as trained, float64 for the exact answer)."""
+    dtype = next(model.parameters()).dtype
+    inputs = [torch.as_tensor(part[name]) for name in CORRESPONDENCE_INPUTS]
+    inputs = [x.to(dtype) if x.is_floating_point() else x for x in inputs]
+    with torch.no_grad():
+        return tuple(x.numpy() for x in model.place(model.heads(*inputs, stencil_matrices(inputs[4], inputs[5]))))

@@ -15,7 +15,7 @@ from app.geometry.descriptors import mesh_inputs  # noqa: E402
 from app.geometry.topology import drop_unreferenced, referenced  # noqa: E402
 from app.inference.template import Template, faces_inside  # noqa: E402
 from tests.conftest import bumpy_patch  # noqa: E402
-from training.correspondence.export import correspondence_parity, export_correspondence  # noqa: E402
+from training.correspondence.export import correspondence_parity, export_correspondence, training_path  # noqa: E402
 from training.correspondence.net import CorrespondenceConfig, stencil_matrices  # noqa: E402
 from training.correspondence.train import TrainingPreset, restored, torch_inputs, train  # noqa: E402
 from training.onnx_export import relative_difference  # noqa: E402
@@ -75,15 +75,12 @@ def float32_error(model, parts: list[dict[str, np.ndarray]]) -> float:
     """How far the network itself, run in float32 as trained, is from its float64 answer: the
     rounding the exported graph (float32 too) cannot be asked to beat."""
     exact = copy.deepcopy(model).double()
-    worst = 0.0
-    for part in parts:
-        inputs = torch_inputs(part)
-        doubled = [x.double() if x.is_floating_point() else x for x in inputs]
-        with torch.no_grad():
-            single = model.place(model.heads(*inputs, stencil_matrices(inputs[4], inputs[5])))
-            expected = exact.place(exact.heads(*doubled, stencil_matrices(doubled[4], doubled[5])))
-        worst = max(worst, *(relative_difference(s.numpy(), e.numpy()) for s, e in zip(single, expected, strict=True)))
-    return worst
+    differences = (
+        relative_difference(single, expected)
+        for part in parts
+        for single, expected in zip(training_path(model, part), training_path(exact, part), strict=True)
+    )
+    return max(differences)
 
 
 def test_a_run_continued_after_its_first_cycle_ends_where_one_run_would(tmp_path):
