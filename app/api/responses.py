@@ -52,6 +52,13 @@ class UnionResponse(BaseModel):
         "one measured from the parts' places where the model card's validation pairs show it helps: below the "
         "graph's threshold).",
     )
+    overlaps_nested: list[bool] = Field(
+        default_factory=list,
+        description="Per union step measured from places, whether it was told nested (overlap 1) instead of its "
+        "measured overlap: every eigenvalue of one operand is at least the other's (as one part lying inside "
+        "another must show) and that operand was placed with a mean confidence below the graph's threshold, too "
+        "uncertain to measure how much of it lies inside.",
+    )
     warnings: list[str] = Field(
         default_factory=list,
         description="What looks wrong though it was answered: an uploaded shape's implausible area, or "

@@ -39,6 +39,7 @@ from app.inference.models import (
     checked_overlaps,
     require_overlap_reader,
 )
+from app.inference.nesting import Nesting
 
 # Where a union's overlaps came from: the client, registered views' footprints, or the parts'
 # places on the template.
@@ -58,6 +59,7 @@ class UnionOutcome:
     boundaries: list[float]  # each step's boundary share as told or measured; empty when neither
     overlaps_from: OverlapSource | None  # where they came from
     overlaps_told: list[bool]  # per step, whether the union operator was told it
+    overlaps_nested: list[bool]  # per step, whether it was told nested (overlap 1) instead of its measured overlap
     placed: list[PlacedPart]  # each uploaded operand placed on the template, when the correspondence model was run
     regions: list[np.ndarray] | None  # each operand's template region (placed or carried), when every one has one
 
@@ -77,6 +79,7 @@ class UnionOutcome:
             "boundaries": self.boundaries,
             "overlaps_from": self.overlaps_from,
             "overlaps_told": self.overlaps_told,
+            "overlaps_nested": self.overlaps_nested,
         }
 
 
@@ -124,17 +127,20 @@ async def union_of_operands(
     regions = [part.region for part in placed] + (carried or [])
     if len(regions) != len(operands):
         regions = None  # some operand's place is unknown: the spectral localizer and no measured overlap
-    told_overlaps, told_boundaries = overlaps, boundaries
+    told_overlaps, told_boundaries, nesting = overlaps, boundaries, None
     if regions is not None and source is None and len(regions) > 1:
         overlaps, boundaries = models.template_regions.fold(regions)
         boundaries = boundaries if models.reads_boundary else None
         source = "correspondence"
         told_overlaps, told_boundaries = _worth_telling(models, overlaps, boundaries)
+        nesting = _nesting(models, placed, regions)
     reported = overlaps or []
-    tell = [share is not None for share in told_overlaps] if told_overlaps is not None else [False] * len(reported)
     started = time.perf_counter()
     values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
-    result = await anyio.to_thread.run_sync(models.union, values, told_overlaps, told_boundaries)
+    result = await anyio.to_thread.run_sync(models.union, values, told_overlaps, told_boundaries, nesting)
+    nested = list(result.nested) if nesting is not None else [False] * len(reported)
+    told_steps = told_overlaps if told_overlaps is not None else [None] * len(reported)
+    tell = [share is not None or step for share, step in zip(told_steps, nested, strict=True)]
     seconds = time.perf_counter() - started
     INFERENCE.labels("union").observe(seconds)
     warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]
@@ -149,6 +155,7 @@ async def union_of_operands(
         boundaries or [],
         source,
         tell,
+        nested,
         placed,
         regions,
     )
@@ -170,6 +177,20 @@ def _worth_telling(
         else [e if share < below else None for share, e in zip(overlaps, boundaries, strict=True)]
     )
     return told, edges
+
+
+def _nesting(models: SpectralModels, placed: list[PlacedPart], regions: list[np.ndarray]) -> Nesting | None:
+    """What the union needs to tell measured steps nested (:mod:`app.inference.nesting`): each
+    operand's place confidence (a carried region's counts as certain) and area; None where the
+    graph never tells a step nested."""
+    below = models.correspondence.nested_below if models.correspondence is not None else 0.0
+    if below <= 0:
+        return None
+    carried = regions[len(placed) :]
+    confidence = [part.placement.mean_confidence for part in placed] + [1.0] * len(carried)
+    area = [float(part.placement.area.sum()) for part in placed]
+    area += [float(models.vertex_area[region].sum()) for region in carried]
+    return Nesting(confidence, area, below)
 
 
 def _placed(models: SpectralModels, operands: list[Operand]) -> list[PlacedPart]:

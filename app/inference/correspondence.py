@@ -23,6 +23,7 @@ from app.contract import CORRESPONDENCE_INPUTS
 from app.core.errors import InputError
 from app.geometry.descriptors import FEATURES, PartInputs, Places
 from app.geometry.laplacian import Operators
+from app.inference.nesting import NESTED_BELOW_KEY
 from app.inference.template import RegionBoundaries, Template
 
 # A part's region is where its area, carried to the template by its places, lies dense. Each
@@ -86,6 +87,11 @@ class Placement:
     confidence: np.ndarray  # (n,) probability of the template patch it was placed in
     vertex: np.ndarray  # (n,) the template vertex nearest to its position
     area: np.ndarray  # (n,) the part's own area at each vertex, m²
+
+    @property
+    def mean_confidence(self) -> float:
+        """The confidence of the part's places, area-weighted: how far its region can be trusted."""
+        return float(self.confidence @ self.area / self.area.sum())
 
 
 @dataclass(frozen=True)
@@ -173,6 +179,7 @@ class PlacingGraph:
             raise ValueError(f"the correspondence graph reads {width} features, the engine computes {FEATURES}")
         metadata = self.session.get_modelmeta().custom_metadata_map
         self.tell_below = float(metadata.get(TELL_BELOW_KEY, 0.0))
+        self.nested_below = float(metadata.get(NESTED_BELOW_KEY, 0.0))
 
     def run(self, inputs: PartInputs) -> Places:
         started = time.perf_counter()
@@ -200,6 +207,7 @@ class CorrespondenceModel:
         self.graph = PlacingGraph(path, threads)
         self.regions = regions
         self.tell_below = self.graph.tell_below
+        self.nested_below = self.graph.nested_below
 
     def place(self, inputs: PartInputs) -> Placement:
         """Each vertex of a part (its inputs from app.geometry.descriptors) on the template."""

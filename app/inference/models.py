@@ -34,6 +34,7 @@ from app.core.errors import InputError
 from app.geometry.laplacian import mesh_operators
 from app.inference.correspondence import CorrespondenceModel, PlacedPart, TemplateRegions
 from app.inference.manifest import verify_manifest
+from app.inference.nesting import NESTED_OVERLAP, Nesting, nested_step
 from app.inference.spectra import InvalidSpectrum
 from app.inference.template import PART_NAMES, Template, localized_region, part_coverage
 
@@ -44,6 +45,7 @@ class UnionEstimate:
 
     eigenvalues: np.ndarray
     sigma: np.ndarray
+    nested: tuple[bool, ...] = ()  # per step, whether it was told nested (app.inference.nesting)
 
     @property
     def lower(self) -> np.ndarray:
@@ -194,17 +196,27 @@ class SpectralModels:
         self.version = digest.hexdigest()[:12]  # content hash: two replicas agree iff they serve the same models
 
     def union(
-        self, spectra: list[np.ndarray], overlaps: list[float] | None = None, boundaries: list[float] | None = None
+        self,
+        spectra: list[np.ndarray],
+        overlaps: list[float] | None = None,
+        boundaries: list[float] | None = None,
+        nesting: Nesting | None = None,
     ) -> UnionEstimate:
         """Union of the spectra, folded left to right: ((A ∪ B) ∪ C) ∪ …, as trained; one is
         returned as is. σ carries each inner union's uncertainty on (:func:`chained_sigma`).
         ``overlaps``, one per step where the caller knows them: the share of the smaller operand
         inside the other (the union so far and the next operand); see :func:`checked_overlaps`.
-        ``boundaries`` beside them: each step's boundary share (:func:`checked_boundaries`)."""
+        ``boundaries`` beside them: each step's boundary share (:func:`checked_boundaries`).
+        ``nesting``: where the overlaps were measured from places, each step whose spectra allow
+        nesting and whose inner candidate is placed uncertainly is told nested instead
+        (:func:`app.inference.nesting.nested_step`)."""
         steps = checked_overlaps(overlaps, len(spectra), self.reads_overlap)
         edges = checked_boundaries(boundaries, overlaps, len(spectra), self.reads_boundary)
         current, sigma = spectra[0].astype(np.float64), np.zeros(self.k)
-        for other, overlap, edge in zip(spectra[1:], steps, edges, strict=True):
+        nested = []
+        for step, (other, overlap, edge) in enumerate(zip(spectra[1:], steps, edges, strict=True)):
+            nested.append(nesting is not None and self.reads_overlap and nested_step(nesting, step, current, other))
+            overlap = NESTED_OVERLAP if nested[-1] else overlap
             told = np.array([UNKNOWN_OVERLAP if overlap is None else overlap]) if self.reads_overlap else None
             boundary = np.array([UNKNOWN_BOUNDARY if edge is None else edge]) if self.reads_boundary else None
             feeds = union_feeds(self.union_inputs, current[None], other[None], told, boundary)
@@ -212,7 +224,7 @@ class SpectralModels:
             sigma = chained_sigma(current, sigma, union[0].astype(np.float64), step_sigma[0].astype(np.float64))
             current = union[0].astype(np.float64)
         _require_finite(current, sigma)
-        return UnionEstimate(current, sigma)
+        return UnionEstimate(current, sigma, tuple(nested))
 
     def union_profile(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """(len(PROFILE_SHARES), k) the union of two spectra told each share of

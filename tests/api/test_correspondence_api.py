@@ -202,6 +202,31 @@ def test_a_measured_overlap_is_told_only_below_the_graphs_threshold(client, samp
     np.testing.assert_allclose(measured["eigenvalues"], by_spectra["eigenvalues"], rtol=1e-6)
 
 
+@pytest.mark.parametrize("nested_below", [0.0, 1.01])
+def test_a_part_twice_is_told_nested_only_below_the_graphs_confidence_threshold(client, samples, nested_below):
+    """A part united with itself could lie inside itself (equal spectra); told nested where its
+    place confidence is below the threshold (every confidence is below 1.01), the union is the
+    one told overlap 1, and the part itself (idempotence); the measured shares are still
+    returned."""
+    correspondence = client.app.state.resources.require_models().correspondence
+    kept, correspondence.nested_below = correspondence.nested_below, nested_below
+    name = "no_head_neck.ply"
+    try:
+        twice = client.post("/v1/union", files=[("files", (name, samples[name]))] * 2).json()
+    finally:
+        correspondence.nested_below = kept
+    nested = nested_below > 1
+    assert twice["overlaps_nested"] == [nested] and twice["overlaps_from"] == "correspondence"
+    assert twice["overlaps_told"] == [nested or twice["overlaps"][0] < correspondence.tell_below]
+    if nested:
+        spectra = json.dumps([operand["eigenvalues"] for operand in twice["operands"]])
+        params = {"overlap": "1"} | ({"boundary": str(twice["boundaries"][0])} if twice["boundaries"] else {})
+        by_spectra = client.post("/v1/union", params=params, data={"spectra": spectra}).json()
+        np.testing.assert_allclose(twice["eigenvalues"], by_spectra["eigenvalues"], rtol=1e-6)
+        part = np.asarray(twice["operands"][0]["eigenvalues"])
+        np.testing.assert_allclose(twice["eigenvalues"], part, rtol=1e-5)
+
+
 def test_one_upload_is_placed_only_where_its_region_is_answered(client, samples):
     """Placing costs a second eigen-solve: a union route with one upload has no step to measure
     and does not place it; /v1/localize, which answers its region, does."""

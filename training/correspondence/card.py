@@ -43,20 +43,24 @@ def render(metrics: dict, command: str) -> str:
         "",
         "Pairs of parts of one person (union error: mean relative error of the 20 eigenvalues; told measured: "
         "the overlap and boundary share measured from the parts' regions; served: told them where the measured "
-        f"overlap is below {pairs['tell_below']:g}, the threshold whose unions erred least on "
-        f"{pairs['validation']['pairs']} validation pairs of the training people ({_pc(pairs['validation']['served'])} "
-        f"there, against {_pc(pairs['validation']['untold'])} untold and {_pc(pairs['validation']['told_measured'])} "
-        "always told)):",
+        f"overlap is below {pairs['tell_below']:g}, and told the pair nested (overlap 1) where every eigenvalue of "
+        "one part is at least the other's and that part's mean place confidence is below "
+        f"{pairs['nested_below']:g}: the thresholds whose unions erred least on {pairs['validation']['pairs']} "
+        f"validation pairs of the training people ({_pc(pairs['validation']['served'])} there, against "
+        f"{_pc(pairs['validation']['untold'])} untold and {_pc(pairs['validation']['told_measured'])} always told "
+        "the measured shares)):",
         "",
-        "| set | kind | pairs | true overlap | overlap / boundary abs. error | union error untold / told measured / "
-        "**served** / told truth | elementwise min | union IoU / mirror-allowed | whole body | spectral localizer |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| set | kind | pairs | true overlap | overlap / boundary abs. error | told nested | union error untold / "
+        "told measured / **served** / told truth | elementwise min | union IoU / mirror-allowed | whole body | "
+        "spectral localizer |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, kinds in pairs["sets"].items():
         for kind, row in kinds.items():
             lines.append(
                 f"| {PAIR_NAMES[name]} | {kind} | {row['pairs']} | {row['true_overlap']:.2f} | "
-                f"{row['overlap_error']:.3f} / {row['boundary_error']:.3f} | {_pc(row['untold'])} / "
+                f"{row['overlap_error']:.3f} / {row['boundary_error']:.3f} | {_pc(row['nested'])} | "
+                f"{_pc(row['untold'])} / "
                 f"{_pc(row['told_measured'])} / **{_pc(row['served'])}** / {_pc(row['told_truth'])} | "
                 f"{_pc(row['elementwise_min'])} | "
                 f"{_pc(row['iou'])} / {_pc(row['iou_mirror'])} | {_pc(row['whole_body_iou'])} | "

@@ -14,7 +14,9 @@ regions; C: unseen identities, camera views) and per variant (mesh, re-meshed, p
 - part-coverage error: mean absolute difference (points) of the 16 body parts' covered shares.
 
 Pairs of parts of one person (:mod:`training.correspondence.pairs`): the overlap measured from
-the two reached regions against the true one, and the union told it or not.
+the two reached regions against the true one, and the union told it or not, or told the pair
+nested where its spectra allow it and its inner candidate is placed uncertainly
+(:mod:`app.inference.nesting`).
 """
 
 from dataclasses import dataclass
@@ -27,6 +29,7 @@ from app.geometry.descriptors import PartInputs
 from app.geometry.tangent import GradientStencil
 from app.inference.correspondence import CorrespondenceModel, Placement
 from app.inference.models import SpectralModels
+from app.inference.nesting import NESTED_OVERLAP, Nesting, inner_confidence
 from app.inference.template import Template
 from training.correspondence.pairs import PAIR_SETS, VALIDATION_SETS, load_pairs
 from training.correspondence.parts import VARIANTS
@@ -132,17 +135,26 @@ def evaluate_correspondence(parts_dir: Path, graph: Path, models: Path) -> dict:
 # The thresholds tried for telling the union the measured overlap: told where the measured share
 # is below it (0: never told; above 1: always).
 TELL_THRESHOLDS = (0.0, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 1.01)
+# The thresholds tried for telling a pair nested: where its inner candidate's mean place
+# confidence is below it (0: never).
+NESTED_THRESHOLDS = (0.0, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7)
 
 
 def evaluate_pairs(parts_dir: Path, graph: Path, models: Path) -> dict:
-    """The pairs' figures: the tell threshold chosen on the validation pairs (training people),
-    then every test pair set's summary with it (see :func:`pair_rows`, :func:`summary`)."""
+    """The pairs' figures: the tell and nested thresholds chosen on the validation pairs
+    (training people), then every test pair set's summary with them (see :func:`pair_rows`,
+    :func:`summary`)."""
     served = SpectralModels(models)
     model = CorrespondenceModel(graph, served.template_regions)
     validation = [row for name in VALIDATION_SETS for row in pair_rows(parts_dir, name, model, served)]
-    threshold = choose_threshold(validation)
-    tests = {name: summary(pair_rows(parts_dir, name, model, served), threshold) for name in PAIR_SETS}
-    return {"tell_below": threshold, "validation": summary(validation, threshold)["all"], "sets": tests}
+    chosen = choose_thresholds(validation)
+    tests = {name: summary(pair_rows(parts_dir, name, model, served), chosen) for name in PAIR_SETS}
+    return {
+        "tell_below": chosen.tell_below,
+        "nested_below": chosen.nested_below,
+        "validation": summary(validation, chosen)["all"],
+        "sets": tests,
+    }
 
 
 def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: SpectralModels) -> list[dict]:
@@ -162,6 +174,8 @@ def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: Sp
         untold = served.union(spectra).eigenvalues
         told = served.union(spectra, measured, measured_edge if served.reads_boundary else None).eigenvalues
         oracle = served.union(spectra, true, true_edge if served.reads_boundary else None).eigenvalues
+        nested = served.union(spectra, [NESTED_OVERLAP], measured_edge if served.reads_boundary else None)
+        certainty = Nesting([p.placement.mean_confidence for p in placed], [p.placement.area.sum() for p in placed], 0)
         localized = np.zeros(n, bool)
         localized[served.localize(untold, spectra).vertices] = True
         plain, mirrored = region_scores(
@@ -177,6 +191,8 @@ def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: Sp
                 "untold": spectral_errors(untold[None], truth)["mre"],
                 "told_measured": spectral_errors(told[None], truth)["mre"],
                 "told_truth": spectral_errors(oracle[None], truth)["mre"],
+                "told_nested": spectral_errors(nested.eigenvalues[None], truth)["mre"],
+                "inner_confidence": inner_confidence(certainty, 0, *spectra),
                 "elementwise_min": spectral_errors(elementwise_min(*(s[None] for s in spectra)), truth)["mre"],
                 "iou": float(plain.iou[0]),
                 "iou_mirror": float(mirrored.iou[0]),
@@ -187,21 +203,44 @@ def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: Sp
     return rows
 
 
-def served_error(row: dict, threshold: float) -> float:
-    """The union's error as served: told the measured shares where the measured overlap is below
-    ``threshold``, untold elsewhere."""
-    return row["told_measured"] if row["measured_overlap"] < threshold else row["untold"]
+@dataclass(frozen=True)
+class Thresholds:
+    """What the served union tells a measured pair: the measured shares where the measured
+    overlap is below ``tell_below``; nested where its inner candidate's confidence is below
+    ``nested_below`` (which wins)."""
+
+    tell_below: float
+    nested_below: float
 
 
-def choose_threshold(rows: list[dict]) -> float:
+def told_nested(row: dict, chosen: Thresholds) -> bool:
+    """Whether the served union tells the pair of ``row`` nested."""
+    return row["inner_confidence"] < chosen.nested_below
+
+
+def served_error(row: dict, chosen: Thresholds) -> float:
+    """The union's error as served (:class:`Thresholds`)."""
+    if told_nested(row, chosen):
+        return row["told_nested"]
+    return row["told_measured"] if row["measured_overlap"] < chosen.tell_below else row["untold"]
+
+
+def choose_thresholds(rows: list[dict]) -> Thresholds:
     """The tell threshold of :data:`TELL_THRESHOLDS` with the lowest mean served error over
-    ``rows`` (validation pairs); the lower threshold where two tie."""
-    errors = [np.mean([served_error(row, t) for row in rows]) for t in TELL_THRESHOLDS]
-    return float(TELL_THRESHOLDS[int(np.argmin(errors))])
+    ``rows`` (validation pairs), never telling them nested; then with it, the nested threshold of
+    :data:`NESTED_THRESHOLDS` that errs least. The lower threshold where two tie."""
+
+    def mean_error(chosen: Thresholds) -> float:
+        return float(np.mean([served_error(row, chosen) for row in rows]))
+
+    tell = min(TELL_THRESHOLDS, key=lambda t: mean_error(Thresholds(t, 0.0)))
+    nested = min(NESTED_THRESHOLDS, key=lambda t: mean_error(Thresholds(tell, t)))
+    return Thresholds(tell, nested)
 
 
-def summary(rows: list[dict], threshold: float) -> dict[str, dict]:
-    """Mean figures per kind and over all rows, with the served error at ``threshold``."""
+def summary(rows: list[dict], chosen: Thresholds) -> dict[str, dict]:
+    """Mean figures per kind and over all rows, with the served error and the share of pairs
+    told nested under ``chosen``."""
     kinds: dict[str, list[dict]] = {}
     for row in rows:
         kinds.setdefault(row["kind"], []).append(row)
@@ -209,7 +248,9 @@ def summary(rows: list[dict], threshold: float) -> dict[str, dict]:
     out = {}
     for kind, members in sorted(kinds.items()):
         numbers = [
-            {k: v for k, v in row.items() if k != "kind"} | {"served": served_error(row, threshold)} for row in members
+            {k: v for k, v in row.items() if k not in ("kind", "inner_confidence")}
+            | {"served": served_error(row, chosen), "nested": float(told_nested(row, chosen))}
+            for row in members
         ]
         out[kind] = {"pairs": len(members)} | _means(numbers)
     return out
