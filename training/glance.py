@@ -157,8 +157,14 @@ def random_region_row(metrics: dict) -> Row:
 
 
 def part_coverage_row(metrics: dict) -> Row:
-    error = metrics["parts"]["test_c"]["mesh"]["coverage_error"]
-    return ("per-part coverage error, camera views (Test C mesh)", f"{error:.1f} points", "≤ 5 points", error <= 5)
+    """Judged on every delivery of a camera view, as the goal is set."""
+    errors = [metrics["parts"]["test_c"][v]["coverage_error"] for v in ("mesh", "remeshed", "cloud")]
+    return (
+        "per-part coverage error, camera views (Test C mesh / re-meshed / cloud)",
+        " / ".join(f"{e:.1f}" for e in errors) + " points",
+        "≤ 5 points",
+        max(errors) <= 5,
+    )
 
 
 def session_pair_row(metrics: dict) -> Row:

@@ -30,7 +30,8 @@ from app.api.operands import (
 from app.core.config import Settings
 from app.geometry.overlap import measured_fold
 from app.geometry.plausibility import size_warnings
-from app.inference.correspondence import InvalidRegion, PlacedPart, region_from_token
+from app.inference.correspondence import PlacedPart
+from app.inference.cover import Cover, InvalidRegion, region_from_token
 from app.inference.models import (
     InvalidOverlap,
     SpectralModels,
@@ -61,7 +62,7 @@ class UnionOutcome:
     overlaps_told: list[bool]  # per step, whether the union operator was told it
     overlaps_nested: list[bool]  # per step, whether it was told nested (overlap 1) instead of its measured overlap
     placed: list[PlacedPart]  # each uploaded operand placed on the template, when the correspondence model was run
-    regions: list[np.ndarray] | None  # each operand's template region (placed or carried), when every one has one
+    covers: list[Cover] | None  # what each operand covers on the template (placed or carried), when every one has one
 
     def fields(self, models: SpectralModels) -> dict:
         """The response fields every union-based endpoint shares."""
@@ -124,11 +125,12 @@ async def union_of_operands(
         overlaps, boundaries = fold.overlaps, fold.boundaries if models.reads_boundary else None
         source = "footprints"
     placed = await anyio.to_thread.run_sync(_placed, models, operands) if places else []
-    regions = [part.region for part in placed] + (carried or [])
-    if len(regions) != len(operands):
-        regions = None  # some operand's place is unknown: the spectral localizer and no measured overlap
+    covers = [part.cover for part in placed] + (carried or [])
+    if len(covers) != len(operands):
+        covers = None  # some operand's place is unknown: the spectral localizer and no measured overlap
     told_overlaps, told_boundaries, nesting = overlaps, boundaries, None
-    if regions is not None and source is None and len(regions) > 1:
+    if covers is not None and source is None and len(covers) > 1:
+        regions = [cover.region for cover in covers]
         overlaps, boundaries = models.template_regions.fold(regions)
         boundaries = boundaries if models.reads_boundary else None
         source = "correspondence"
@@ -157,7 +159,7 @@ async def union_of_operands(
         tell,
         nested,
         placed,
-        regions,
+        covers,
     )
 
 
@@ -207,8 +209,8 @@ def _placed(models: SpectralModels, operands: list[Operand]) -> list[PlacedPart]
     return placed
 
 
-def _carried_regions(text: str | None, spectra: str | None, models: SpectralModels) -> list[np.ndarray] | None:
-    """The ``regions`` form field as one template region per spectra operand (None when not
+def _carried_regions(text: str | None, spectra: str | None, models: SpectralModels) -> list[Cover] | None:
+    """The ``regions`` form field as one template cover per spectra operand (None when not
     sent); checked before anything is solved."""
     if text is None:
         return None

@@ -33,6 +33,7 @@ from app.contract import (
 from app.core.errors import InputError
 from app.geometry.laplacian import mesh_operators
 from app.inference.correspondence import CorrespondenceModel, PlacedPart, TemplateRegions
+from app.inference.cover import Cover, united
 from app.inference.manifest import verify_manifest
 from app.inference.nesting import NESTED_OVERLAP, Nesting, nested_step
 from app.inference.spectra import InvalidSpectrum
@@ -249,24 +250,25 @@ class SpectralModels:
         inside = localized_region(probability[:1], parts_probability, self.vertex_area, self.template.mirror)[0]
         return self.region_of(inside)
 
-    def placed_region(
-        self, regions: Sequence[np.ndarray], placed: Sequence[PlacedPart]
-    ) -> tuple[Region, np.ndarray | None]:
-        """The union of operands' template regions and, when every one was placed here (``placed``
-        holds them all), per template vertex in it the confidence of the nearest placed part
-        vertex (a vertex the closing filled takes its neighbour's); else None."""
-        inside = np.logical_or.reduce(list(regions))
-        if len(placed) != len(regions):
-            return self.region_of(inside), None
+    def placed_region(self, covers: Sequence[Cover], placed: Sequence[PlacedPart]) -> tuple[Region, np.ndarray | None]:
+        """The union of operands' covers on the template and, when every one was placed here
+        (``placed`` holds them all), per template vertex in its region the confidence of the
+        nearest placed part vertex (a vertex the heat step filled takes its neighbour's); else
+        None."""
+        union = united(list(covers))
+        if len(placed) != len(covers):
+            return self.region_of(union.region, union.share), None
         positions = np.concatenate([part.placement.position for part in placed])
         confidence = np.concatenate([part.placement.confidence for part in placed])
-        _, nearest = cKDTree(positions).query(self.template.vertices[inside])
-        return self.region_of(inside), confidence[nearest]
+        _, nearest = cKDTree(positions).query(self.template.vertices[union.region])
+        return self.region_of(union.region, union.share), confidence[nearest]
 
-    def region_of(self, inside: np.ndarray) -> Region:
-        """A template mask (V,) as a region: its vertices, area share and part coverage."""
-        shares = part_coverage(inside, self.vertex_area, self.template.labels)
-        coverage = {name: float(share) for name, share in zip(PART_NAMES, shares, strict=True)}
+    def region_of(self, inside: np.ndarray, share: np.ndarray | None = None) -> Region:
+        """A template mask (V,) as a region: its vertices, area share and part coverage, summed
+        from each vertex's covered ``share`` where a placed part's cover gives it, else from the
+        mask."""
+        shares = part_coverage(inside if share is None else share, self.vertex_area, self.template.labels)
+        coverage = {name: float(value) for name, value in zip(PART_NAMES, shares, strict=True)}
         area = self.vertex_area
         return Region(np.flatnonzero(inside), float(area[inside].sum() / area.sum()), coverage)
 

@@ -107,7 +107,8 @@ def boundary_share(a: np.ndarray, b: np.ndarray, union: np.ndarray) -> np.ndarra
 
 def part_coverage(masks: np.ndarray, vertex_area: np.ndarray, labels: np.ndarray) -> np.ndarray:
     """(..., parts) the covered share of each body part's area (in :data:`PART_NAMES` order) for
-    boolean template masks (..., n): what a front-end shows as "still missing". Areas, not vertex
+    template masks (..., n), boolean or each vertex's covered share in 0 … 1: what a front-end
+    shows as "still missing". Areas, not vertex
     counts, since the template's triangles are far from uniform (a hand has five times a
     thigh's vertices)."""
     share = np.zeros((len(labels), len(PART_NAMES)))

@@ -160,8 +160,12 @@ def test_spectra_sent_with_their_regions_are_placed_as_their_uploads(client, sam
     assert by_spectra["overlaps"] == pytest.approx(by_files["overlaps"])
     np.testing.assert_allclose(by_spectra["eigenvalues"], by_files["eigenvalues"], rtol=1e-6)
     assert by_spectra["vertex_confidence"] is None  # no part was placed in this request
+    # the tokens carry each vertex's covered share in sixteenths: coverage within rounding
+    assert by_spectra["part_coverage"] == pytest.approx(by_files["part_coverage"], abs=0.02)
     chained = {"spectra": json.dumps([by_spectra["eigenvalues"]]), "regions": json.dumps([by_spectra["region_token"]])}
-    assert client.post("/v1/localize", data=chained).json()["vertices"] == by_files["vertices"]
+    again = client.post("/v1/localize", data=chained).json()
+    assert again["vertices"] == by_files["vertices"]
+    assert again["part_coverage"] == pytest.approx(by_files["part_coverage"], abs=0.02)
 
 
 @pytest.mark.parametrize(
@@ -171,6 +175,7 @@ def test_spectra_sent_with_their_regions_are_placed_as_their_uploads(client, sam
         ('["region1:AAAA"]', "regions[0]"),
         ('["fp1.AAAA"]', "regions[0]"),
         ('["region1:!!!"]', "regions[0]"),
+        ('["region2:AAAA"]', "regions[0]"),
         ("[]", "one per spectra operand"),
     ],
 )

@@ -53,7 +53,8 @@ def test_a_template_part_lands_near_itself_mesh_or_cloud(models):
     for inputs in (mesh_inputs(vertices, faces), cloud_inputs(vertices, None)):
         placement = models.correspondence.place(inputs)
         assert np.mean(np.linalg.norm(placement.position - truth, axis=1) < 0.10) > 0.8
-    region = models.region_of(models.correspondence.region(models.correspondence.place(mesh_inputs(vertices, faces))))
+    cover = models.correspondence.cover(models.correspondence.place(mesh_inputs(vertices, faces)))
+    region = models.region_of(cover.region, cover.share)
     assert region.part_coverage["torso"] > 0.7 and region.part_coverage["head"] < 0.2
 
 

@@ -33,7 +33,7 @@ def test_a_region_placed_exactly_is_covered_with_its_outline_kept(regions):
     """Every vertex placed on itself with its own area: the region is the part's, its outline
     neither grown nor shrunk by more than the heat step's reach (a few template edges)."""
     mask = _plane(regions, 2, 0.4)
-    covered = regions.covered(np.flatnonzero(mask), regions.vertex_area[mask])
+    covered = regions.cover(np.flatnonzero(mask), regions.vertex_area[mask]).region
     assert _iou(regions, covered, mask) > 0.95
     distance, _ = cKDTree(regions.tree.data[mask]).query(regions.tree.data[covered ^ mask])
     assert distance.max() <= 0.05
@@ -45,7 +45,7 @@ def test_a_sparsely_placed_part_is_closed_into_its_region(regions):
     mask = _plane(regions, 2, 0.4)
     rng = np.random.default_rng(0)
     sparse = rng.choice(np.flatnonzero(mask), size=mask.sum() // 4, replace=False)
-    covered = regions.covered(sparse, 4 * regions.vertex_area[sparse])
+    covered = regions.cover(sparse, 4 * regions.vertex_area[sparse]).region
     assert _iou(regions, covered, mask) > 0.95
 
 
@@ -53,15 +53,15 @@ def test_the_region_does_not_depend_on_the_part_s_scale(regions):
     """A bigger person's part (all areas ×2.5, or ×0.4) covers the same template region."""
     mask = _plane(regions, 0, 0.3)
     index, area = np.flatnonzero(mask), regions.vertex_area[mask]
-    same = regions.covered(index, area)
+    same = regions.cover(index, area).region
     for factor in (2.5, 0.4):
-        assert _iou(regions, regions.covered(index, factor * area), same) > 0.97
+        assert _iou(regions, regions.cover(index, factor * area).region, same) > 0.97
 
 
 def test_a_part_of_a_few_vertices_still_covers_where_it_lands(regions):
     """Three vertices carry too little area to be dense anywhere: they cover where they land."""
     index = np.array([10, 2000, 4000])
-    covered = regions.covered(index, np.full(3, 1e-6))
+    covered = regions.cover(index, np.full(3, 1e-6)).region
     assert np.flatnonzero(covered).tolist() == index.tolist()
 
 

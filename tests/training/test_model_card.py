@@ -8,7 +8,7 @@ from pathlib import Path
 from training.correspondence import card as correspondence_card
 from training.glance import BEGIN as GLANCE_BEGIN
 from training.glance import END as GLANCE_END
-from training.glance import render_glance, same_region_row, session_pair_row, unseen_types_row
+from training.glance import part_coverage_row, render_glance, same_region_row, session_pair_row, unseen_types_row
 from training.learning.card import BEGIN, END, EVALUATION, render, render_summary
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
@@ -90,3 +90,14 @@ def test_the_session_union_goal_is_judged_on_every_kind_not_their_mean():
     assert session_pair_row(metrics)[3] is True
     metrics["pairs"]["sets"]["pairs_c"]["camera_close_up"]["served"] = 0.045
     assert session_pair_row(metrics)[3] is False
+
+
+def test_the_coverage_goal_is_judged_on_every_camera_delivery():
+    """Every Test C delivery within 5 points: met; a point cloud's 5.2 beside meshes' 4.1: not."""
+    metrics = json.loads((MODELS / "correspondence.json").read_text())
+    views = metrics["parts"]["test_c"]
+    for variant in ("mesh", "remeshed", "cloud"):
+        views[variant]["coverage_error"] = 4.1
+    assert part_coverage_row(metrics)[3] is True
+    views["cloud"]["coverage_error"] = 5.2
+    assert part_coverage_row(metrics)[3] is False

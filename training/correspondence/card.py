@@ -22,8 +22,8 @@ def render(metrics: dict, command: str) -> str:
         "",
         "Parts placed on the template (means over parts; error: each vertex's place against its true rest-pose "
         "vertex, area-weighted; IoU area-weighted; coverage error: mean over the 16 body parts of the covered "
-        "share's difference, points; true places: the same region rule fed each vertex's true place, the most it "
-        "can reach).",
+        "share's difference, points, as served: summed from each template vertex's covered share, the localizer's "
+        "from its region; true places: the same region rule fed each vertex's true place, the most it can reach).",
         "",
         "| set | variant | parts | place error cm (centroid) | ≤ 5 / ≤ 10 cm | flips | IoU / mirror-allowed "
         "| true places | whole body | spectral localizer (mirror-allowed) | coverage error (localizer) |",

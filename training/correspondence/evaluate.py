@@ -11,7 +11,8 @@ regions; C: unseen identities, camera views) and per variant (mesh, re-meshed, p
 - region IoU (area-weighted, plain and mirror-allowed) of the reached region against the true
   one, beside the whole body (IoU = the true area share), the spectral localizer, and the same
   region rule fed each vertex's true place (the most the rule can reach with perfect places);
-- part-coverage error: mean absolute difference (points) of the 16 body parts' covered shares.
+- part-coverage error: mean absolute difference (points) of the 16 body parts' covered shares,
+  as served (from each template vertex's covered share; the localizer's from its region).
 
 Pairs of parts of one person (:mod:`training.correspondence.pairs`): the overlap measured from
 the two reached regions against the true one, and the union told it or not, or told the pair
@@ -28,9 +29,10 @@ from app.contract import CORRESPONDENCE_INPUTS
 from app.geometry.descriptors import PartInputs
 from app.geometry.tangent import GradientStencil
 from app.inference.correspondence import CorrespondenceModel, Placement
+from app.inference.cover import Cover
 from app.inference.models import SpectralModels
 from app.inference.nesting import NESTED_OVERLAP, Nesting, inner_confidence
-from app.inference.template import Template
+from app.inference.template import PART_NAMES, Template, part_coverage
 from training.correspondence.pairs import PAIR_SETS, VALIDATION_SETS, load_pairs
 from training.correspondence.parts import VARIANTS
 from training.correspondence.train import load_parts
@@ -68,10 +70,18 @@ def region_scores(predicted: np.ndarray, truth: np.ndarray, template: Template, 
     return plain, symmetric_scores(predicted, targets, area, template.mirror, template.labels)
 
 
+def coverage_error(share: np.ndarray, truth: np.ndarray, template: Template, area: np.ndarray) -> float:
+    """The mean absolute error of the body parts' covered shares, as served (summed from each
+    template vertex's covered ``share``), against the true region's."""
+    present = np.bincount(template.labels, minlength=len(PART_NAMES)) > 0  # parts a template may lack
+    served, true = (part_coverage(mask, area, template.labels) for mask in (share, truth))
+    return float(np.abs(served - true)[present].mean())
+
+
 def score_part(
     part: dict[str, np.ndarray],
     placement: Placement,
-    region: np.ndarray,
+    cover: Cover,
     truth: np.ndarray,
     localized: np.ndarray,
     perfect: np.ndarray,
@@ -86,7 +96,7 @@ def score_part(
     error = np.linalg.norm(placement.position - rest[target], axis=1)
     mirrored = np.linalg.norm(placement.position - rest[template.mirror[target]], axis=1)
     centroid = (vertex_area @ rest) / vertex_area.sum()
-    plain, mirror = region_scores(np.stack([region, localized, perfect]), truth, template, vertex_area)
+    plain, mirror = region_scores(np.stack([cover.region, localized, perfect]), truth, template, vertex_area)
     return PartScore(
         error_cm=100 * float(weight @ error),
         within_5=float(weight @ (error <= 0.05)),
@@ -99,7 +109,7 @@ def score_part(
         whole_body_iou=float(vertex_area[truth].sum() / vertex_area.sum()),
         localizer_iou=float(plain.iou[1]),
         localizer_iou_mirror=float(mirror.iou[1]),
-        coverage_error=100 * float(plain.coverage_error[0]),
+        coverage_error=100 * coverage_error(cover.share, truth, template, vertex_area),
         localizer_coverage_error=100 * float(plain.coverage_error[1]),
     )
 
@@ -118,15 +128,15 @@ def evaluate_correspondence(parts_dir: Path, graph: Path, models: Path) -> dict:
         for part in parts:
             truth = np.unpackbits(part["mask"], count=n).astype(bool)
             placement = model.place(_inputs(part))
-            region = model.region(placement)
+            cover = model.cover(placement)
             body = np.asarray(shapes[int(part["shape"])], dtype=np.float64)
             spectrum = task_spectrum(body, template.faces, truth, str(part["variant"]), served.k)
             localized = served.localize(spectrum).vertices if np.isfinite(spectrum).all() else np.arange(n)
             localized_mask = np.zeros(n, bool)
             localized_mask[localized] = True
-            perfect = model.regions.covered(part["target"], placement.area)
+            perfect = model.regions.cover(part["target"], placement.area).region
             rows[str(part["variant"])].append(
-                score_part(part, placement, region, truth, localized_mask, perfect, template, served.vertex_area)
+                score_part(part, placement, cover, truth, localized_mask, perfect, template, served.vertex_area)
             )
         table[name] = {variant: _mean(scores) for variant, scores in rows.items() if scores}
     return table

@@ -17,7 +17,8 @@ from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, Problem
 from app.api.responses import MODEL_VERSION_FIELD, NPZ_MEDIA_TYPE
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
 from app.geometry.pipeline import Solved
-from app.inference.correspondence import Placement, region_token
+from app.inference.correspondence import Placement
+from app.inference.cover import region_token
 from app.inference.models import SpectralModels
 
 router = APIRouter(tags=["correspondence"])
@@ -112,8 +113,7 @@ async def correspondence(
         return Response(
             ply, media_type="application/ply", headers={"content-disposition": "inline; filename=correspondence.ply"}
         )
-    covered = models.region_of(region)
-    weight = solved.part.mass / solved.part.mass.sum()
+    covered = models.region_of(region, placed.cover.share)
     return CorrespondenceResponse(
         model_version=models.version,
         eigenvalues=solved.report.eigenvalues,
@@ -122,12 +122,12 @@ async def correspondence(
         template_vertex=placement.vertex.tolist(),
         position=np.round(placement.position, POSITION_DECIMALS).tolist(),
         confidence=np.round(placement.confidence, CONFIDENCE_DECIMALS).tolist(),
-        mean_confidence=float(weight @ placement.confidence),
+        mean_confidence=placement.mean_confidence,
         region=CorrespondenceRegion(
             vertices=covered.vertices.tolist(),
             area_fraction=covered.area_fraction,
             part_coverage=covered.part_coverage,
-            token=region_token(region),
+            token=region_token(placed.cover),
         ),
         template_vertices=len(models.template.vertices),
         warnings=solved.report.warnings,

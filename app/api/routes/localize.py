@@ -12,7 +12,7 @@ from app.api.examples import success
 from app.api.metrics import INFERENCE
 from app.api.responses import UNION_PROBLEMS, UnionResponse
 from app.api.unions import UnionDep
-from app.inference.correspondence import region_token
+from app.inference.cover import region_token, united
 from app.inference.template import coloured_template
 
 router = APIRouter(tags=["unions"])
@@ -62,8 +62,8 @@ async def localize(
     models = union.models
     outcome = await union.solved(locate=True)
     confidence = None
-    if outcome.regions is not None:
-        region, confidence = await anyio.to_thread.run_sync(models.placed_region, outcome.regions, outcome.placed)
+    if outcome.covers is not None:
+        region, confidence = await anyio.to_thread.run_sync(models.placed_region, outcome.covers, outcome.placed)
     else:
         started = time.perf_counter()
         # A union holds each of its operands' own regions; one operand is its own union.
@@ -81,7 +81,7 @@ async def localize(
         area_fraction=region.area_fraction,
         part_coverage=region.part_coverage,
         template_vertices=len(models.template.vertices),
-        located_by="spectrum" if outcome.regions is None else "correspondence",
-        region_token=None if outcome.regions is None else region_token(np.logical_or.reduce(outcome.regions)),
+        located_by="spectrum" if outcome.covers is None else "correspondence",
+        region_token=None if outcome.covers is None else region_token(united(outcome.covers)),
         vertex_confidence=None if confidence is None else np.round(confidence, 3).tolist(),
     )
