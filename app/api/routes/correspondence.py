@@ -30,10 +30,14 @@ CONFIDENCE_DECIMALS = 3
 class CorrespondenceRegion(BaseModel):
     vertices: list[int] = Field(description="Template vertices the part covers: where its placed area lies dense.")
     area_fraction: float = Field(description="Share of the template's area covered.")
-    part_coverage: dict[str, float] = Field(description="Covered share of each body part's area.")
+    part_coverage: dict[str, float] = Field(
+        description="Covered share of each body part's area, summed from how much of the template around each "
+        "vertex the part's placed area fills (the gaps between a ragged view's strips do not count)."
+    )
     token: str = Field(
-        description="The region as a token: send it in regions beside this part's spectrum, so later unions "
-        "and localizations place the part without uploading it again."
+        description="The region and its covered shares as a token: send it in regions beside this part's "
+        "spectrum, so later unions and localizations place the part, and read its coverage, without uploading it "
+        "again."
     )
 
 

@@ -35,9 +35,9 @@ class LocalizeResponse(UnionResponse):
     )
     region_token: str | None = Field(
         None,
-        description="With correspondence: the region as a token to send back in regions beside its union's "
-        "spectrum (the next step of a session), so the next union is localized and its overlap measured on the "
-        "template.",
+        description="With correspondence: the region and its covered shares as a token to send back in regions "
+        "beside its union's spectrum (the next step of a session), so the next union is localized, its overlap "
+        "measured and its coverage read on the template.",
     )
 
 
