@@ -33,7 +33,7 @@ from app.contract import (
 from app.core.errors import InputError
 from app.geometry.laplacian import mesh_operators
 from app.inference.correspondence import CorrespondenceModel, PlacedPart, TemplateRegions
-from app.inference.cover import Cover, united
+from app.inference.cover import Cover
 from app.inference.manifest import verify_manifest
 from app.inference.nesting import NESTED_OVERLAP, Nesting, nested_step
 from app.inference.spectra import InvalidSpectrum
@@ -250,18 +250,20 @@ class SpectralModels:
         inside = localized_region(probability[:1], parts_probability, self.vertex_area, self.template.mirror)[0]
         return self.region_of(inside)
 
-    def placed_region(self, covers: Sequence[Cover], placed: Sequence[PlacedPart]) -> tuple[Region, np.ndarray | None]:
-        """The union of operands' covers on the template and, when every one was placed here
-        (``placed`` holds them all), per template vertex in its region the confidence of the
-        nearest placed part vertex (a vertex the heat step filled takes its neighbour's); else
-        None."""
-        union = united(list(covers))
-        if len(placed) != len(covers):
-            return self.region_of(union.region, union.share), None
+    def placed_region(
+        self, union: Cover, placed: Sequence[PlacedPart], operands: int
+    ) -> tuple[Region, np.ndarray | None]:
+        """The region of ``union``, the operands' covers united on the template, and, when every
+        one of the ``operands`` was placed here (``placed`` holds them all), per template vertex
+        in it the confidence of the nearest placed part vertex (a vertex the heat step filled
+        takes its neighbour's); else None."""
+        region = self.region_of(union.region, union.share)
+        if len(placed) != operands:
+            return region, None
         positions = np.concatenate([part.placement.position for part in placed])
         confidence = np.concatenate([part.placement.confidence for part in placed])
         _, nearest = cKDTree(positions).query(self.template.vertices[union.region])
-        return self.region_of(union.region, union.share), confidence[nearest]
+        return region, confidence[nearest]
 
     def region_of(self, inside: np.ndarray, share: np.ndarray | None = None) -> Region:
         """A template mask (V,) as a region: its vertices, area share and part coverage, summed

@@ -32,13 +32,13 @@ from app.inference.correspondence import CorrespondenceModel, Placement
 from app.inference.cover import Cover
 from app.inference.models import SpectralModels
 from app.inference.nesting import NESTED_OVERLAP, Nesting, inner_confidence
-from app.inference.template import PART_NAMES, Template, part_coverage
+from app.inference.template import Template
 from training.correspondence.pairs import PAIR_SETS, VALIDATION_SETS, load_pairs
 from training.correspondence.parts import VARIANTS
 from training.correspondence.train import load_parts
 from training.data.spectra import task_spectrum
 from training.learning.baselines import elementwise_min
-from training.learning.masks import symmetric_scores
+from training.learning.masks import present_part_coverage, symmetric_scores
 from training.learning.spectral_errors import spectral_errors
 
 TEST_SETS = ("test_a", "test_b", "test_c")
@@ -73,9 +73,8 @@ def region_scores(predicted: np.ndarray, truth: np.ndarray, template: Template, 
 def coverage_error(share: np.ndarray, truth: np.ndarray, template: Template, area: np.ndarray) -> float:
     """The mean absolute error of the body parts' covered shares, as served (summed from each
     template vertex's covered ``share``), against the true region's."""
-    present = np.bincount(template.labels, minlength=len(PART_NAMES)) > 0  # parts a template may lack
-    served, true = (part_coverage(mask, area, template.labels) for mask in (share, truth))
-    return float(np.abs(served - true)[present].mean())
+    served, true = (present_part_coverage(mask, area, template.labels) for mask in (share, truth))
+    return float(np.abs(served - true).mean())
 
 
 def score_part(

@@ -29,14 +29,20 @@ class MaskScores:
     coverage_error: np.ndarray
 
 
+def present_part_coverage(masks: np.ndarray, weights: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """(..., present parts) the covered share of each body part the template has (a test
+    template may lack some), for masks (..., n), boolean or each vertex's covered share."""
+    present = np.bincount(labels, minlength=len(PART_NAMES)) > 0
+    return part_coverage(masks, weights, labels)[..., present]
+
+
 def symmetric_scores(
     predicted: np.ndarray, truth: np.ndarray, weights: np.ndarray, mirror: np.ndarray, labels: np.ndarray
 ) -> MaskScores:
     """Scores of (m, n) boolean masks, each row against the better orientation of its truth;
     ``labels`` are the template's part labels."""
     w = weights / weights.sum()
-    present = np.bincount(labels, minlength=len(PART_NAMES)) > 0  # parts a (test) template may lack
-    predicted_coverage = part_coverage(predicted, weights, labels)[:, present]
+    predicted_coverage = present_part_coverage(predicted, weights, labels)
     orientations = []
     for target in (truth, truth[:, mirror]):
         intersection = (predicted & target) @ w
@@ -45,7 +51,7 @@ def symmetric_scores(
             MaskScores(
                 iou=np.where(union > 0, intersection / np.maximum(union, 1e-12), 1.0),
                 accuracy=(predicted == target) @ w,
-                coverage_error=np.abs(predicted_coverage - part_coverage(target, weights, labels)[:, present]).mean(1),
+                coverage_error=np.abs(predicted_coverage - present_part_coverage(target, weights, labels)).mean(1),
             )
         )
     direct, mirrored = orientations

@@ -61,9 +61,11 @@ async def localize(
     probabilities expect, grown to hold each operand's own region."""
     models = union.models
     outcome = await union.solved(locate=True)
-    confidence = None
+    confidence = union_cover = None
     if outcome.covers is not None:
-        region, confidence = await anyio.to_thread.run_sync(models.placed_region, outcome.covers, outcome.placed)
+        union_cover = united(outcome.covers)
+        count = len(outcome.covers)
+        region, confidence = await anyio.to_thread.run_sync(models.placed_region, union_cover, outcome.placed, count)
     else:
         started = time.perf_counter()
         # A union holds each of its operands' own regions; one operand is its own union.
@@ -82,6 +84,6 @@ async def localize(
         part_coverage=region.part_coverage,
         template_vertices=len(models.template.vertices),
         located_by="spectrum" if outcome.covers is None else "correspondence",
-        region_token=None if outcome.covers is None else region_token(united(outcome.covers)),
+        region_token=None if union_cover is None else region_token(union_cover),
         vertex_confidence=None if confidence is None else np.round(confidence, 3).tolist(),
     )
