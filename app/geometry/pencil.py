@@ -31,8 +31,11 @@ class NoConvergence(SolverFailure):
 
 class Factor:
     """(C − σI)⁻¹ as a linear operator and, read from its pivots when asked (a copy of the factor:
-    ~3 ms on the 13 k body, which a one-piece solve does not need), how many eigenvalues of C lie
-    below σ."""
+    ~1–3 ms on the 13 k body), how many eigenvalues of C lie below σ.
+
+    Moved to another shift (:meth:`move`), the factor keeps its ordering and symbolic analysis and
+    only refactors numerically: 4 ms against 13 ms on the 13 k body.
+    """
 
     def __init__(self, upper: sp.csc_matrix, shift: float):
         try:
@@ -40,8 +43,22 @@ class Factor:
         except ValueError as exc:
             raise SolverFailure(f"the eigen-solver failed on this shape: {library_reason(exc)}") from exc
         self.shift = shift
+        self._pattern = (upper.indptr, upper.indices)
         n = upper.shape[0]
         self.operator = sla.LinearOperator((n, n), matvec=self._solver.solve, dtype=np.float64)
+
+    def move(self, upper: sp.csc_matrix, shift: float) -> bool:
+        """Refactor in place for ``upper`` at ``shift``; False (nothing changed) when its sparsity
+        differs from the factor's, which then needs a new analysis."""
+        if not all(np.array_equal(a, b) for a, b in zip(self._pattern, (upper.indptr, upper.indices), strict=True)):
+            return False
+        try:
+            self._solver.update(upper, upper=True)
+        except ValueError as exc:
+            raise SolverFailure(f"the eigen-solver failed on this shape: {library_reason(exc)}") from exc
+        self.shift = shift
+        self.__dict__.pop("_pivots", None)
+        return True
 
     @cached_property
     def _pivots(self) -> np.ndarray:
@@ -84,9 +101,13 @@ class ShiftedPencil:
         self.size = len(diagonal)
         self.lowest_shift = lowest_shift(diagonal)
 
-    def factor(self, shift: float) -> Factor:
-        """The LDLᵀ of C − ``shift``·I (raises :class:`SolverFailure` when it breaks down)."""
-        return Factor(_shifted_upper(self.stiffness, self.free, self.inverse_root, shift), shift)
+    def factor(self, shift: float, reuse: Factor | None = None) -> Factor:
+        """The LDLᵀ of C − ``shift``·I (raises :class:`SolverFailure` when it breaks down); with
+        ``reuse``, that factor moved to ``shift`` (its old shift is gone) where its sparsity allows."""
+        upper = _shifted_upper(self.stiffness, self.free, self.inverse_root, shift)
+        if reuse is not None and reuse.move(upper, shift):
+            return reuse
+        return Factor(upper, shift)
 
     def nearest(
         self, factor: Factor, count: int, *, vectors: bool = False, restarts: int | None = None

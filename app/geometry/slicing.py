@@ -70,18 +70,18 @@ def sliced_eigenpairs(
     assert size >= 2, "a slice's spacing is measured between at least two eigenvalues"
     slices = math.ceil(k / size)
     size = math.ceil(k / slices)
-    lowest = pencil.factor(pencil.lowest_shift)
-    if lowest.below:  # a negative eigenvalue: the plain solve reports it as such
+    factor = pencil.factor(pencil.lowest_shift)
+    if factor.below:  # a negative eigenvalue: the plain solve reports it as such
         raise InconsistentSlices("an eigenvalue lies below the lowest shift")
     values = np.full(k, np.nan)
-    values[:size], functions = pencil.nearest(lowest, size, vectors=vectors)
+    values[:size], functions = pencil.nearest(factor, size, vectors=vectors)
     top = size - 1  # values[: top + 1] are known
     while top < k - 1:
         wanted = min(size, k - 1 - top)
         spacing = (values[top] - values[0]) / top
         shift = values[top] + spacing * (wanted + 1) / 2
         try:
-            factor = pencil.factor(shift)
+            factor = pencil.factor(shift, reuse=factor)  # the last slice's, refactored
             first, block, block_functions = _block_reaching(pencil, factor, top, size, vectors)
         except SolverFailure as exc:  # LDLᵀ without pivoting, or ARPACK, broke down at this shift
             raise InconsistentSlices(f"the slice at {shift:g} broke down: {exc}") from exc

@@ -30,9 +30,9 @@ class CountingPencil(ShiftedPencil):
         super().__init__(*args)
         self.shifts: list[float] = []
 
-    def factor(self, shift):
+    def factor(self, shift, reuse=None):
         self.shifts.append(shift)
-        return super().factor(shift)
+        return super().factor(shift, reuse)
 
 
 @pytest.fixture(scope="module")
@@ -110,10 +110,10 @@ class LandingPencil(ShiftedPencil):
         super().__init__(operators, fixed)
         self.truth = truth
 
-    def factor(self, shift):
+    def factor(self, shift, reuse=None):
         if shift > self.lowest_shift:
             shift = float(self.truth[np.abs(self.truth - shift).argmin()])
-        return super().factor(shift)
+        return super().factor(shift, reuse)
 
 
 def test_a_shift_on_an_eigenvalue_is_refused_not_trusted(patch):

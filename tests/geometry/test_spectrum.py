@@ -8,6 +8,7 @@ import scipy.sparse.linalg as sla
 
 from app.geometry.errors import SolverFailure
 from app.geometry.laplacian import mesh_operators
+from app.geometry.pencil import ShiftedPencil
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
 from app.geometry.spectrum import eigenpairs, eigenvalues, shift_for
@@ -185,3 +186,29 @@ def test_a_solver_breakdown_is_a_solver_failure_not_a_crash(patch):
     poisoned[5, 5] = np.nan
     with pytest.raises(SolverFailure, match="eigen-solver failed"):
         eigenvalues((poisoned.tocsr(), mass), 10)
+
+
+def test_a_factor_moved_to_another_shift_is_that_shifts_factor(patch):
+    """Refactored in place (its ordering and analysis kept), a factor solves and counts exactly as
+    one built afresh at the new shift: the same solution to the last bit, the same inertia."""
+    operators = mesh_operators(patch.vertices, patch.faces)
+    pencil = ShiftedPencil(operators, boundary_vertex_mask(patch.faces, len(patch.vertices)))
+    truth = eigenvalues(operators, 30, boundary_vertex_mask(patch.faces, len(patch.vertices)))
+    shift = float(truth[11] + truth[12]) / 2  # twelve eigenvalues below it
+    moved = pencil.factor(pencil.lowest_shift)
+    assert moved.below == 0
+    assert pencil.factor(shift, reuse=moved) is moved and moved.shift == shift
+    fresh = pencil.factor(shift)
+    right = np.random.default_rng(0).standard_normal(pencil.size)
+    np.testing.assert_array_equal(moved.operator.matvec(right), fresh.operator.matvec(right))
+    assert moved.below == fresh.below == 12
+
+
+def test_a_factor_is_not_moved_onto_another_sparsity(patch):
+    """The same shape with its boundary held fixed has fewer unknowns: a new factor, the old one
+    left as it was."""
+    operators = mesh_operators(patch.vertices, patch.faces)
+    factor = ShiftedPencil(operators).factor(-1.0)
+    other = ShiftedPencil(operators, boundary_vertex_mask(patch.faces, len(patch.vertices)))
+    assert other.factor(-1.0, reuse=factor) is not factor
+    assert factor.shift == -1.0
