@@ -5,7 +5,8 @@ it is asked for (its Lanczos basis of 2k + 1 vectors is re-orthogonalized at eve
 k = 100 on a 13 k-vertex body that overhead, not the factorization, was two thirds of the time.
 Here ARPACK is asked for at most ``SLICE_SIZE`` (+ a margin) eigenvalues at a time: the lowest
 slice at the usual shift below the spectrum, each next one around a shift placed past the last
-known eigenvalue, with its own factorization.
+known eigenvalue, over the previous slice's factorization moved there (refactored numerically,
+its ordering and analysis kept: a third of a new one's cost).
 
 Why it is exact: the factorization at a shift σ also counts the eigenvalues below σ (Sylvester's
 inertia), so the eigenvalues ARPACK finds around σ get their indices in the spectrum, not a

@@ -8,7 +8,7 @@ Speed: M is diagonal, so the pencil is turned into the standard symmetric proble
 C = M^-1/2 S M^-1/2 and solved by ARPACK in shift-invert mode over one sparse LDLᵀ
 factorization (:mod:`app.geometry.pencil`; SciPy's default path uses a general LU instead).
 More than ``SLICED_ABOVE`` eigenvalues are solved in slices of the spectrum
-(:mod:`app.geometry.slicing`), each over its own factorization, since ARPACK's own work grows
+(:mod:`app.geometry.slicing`), each over a factorization at its own shift, since ARPACK's own work grows
 with the square of how many it is asked for.
 """
 
