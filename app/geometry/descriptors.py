@@ -34,6 +34,7 @@ from app.geometry.tangent import (
 from app.geometry.topology import boundary_vertex_mask
 
 FEATURES = len(HKS_TIMES) + 2  # the HKS at each time, the mean curvature, the boundary flag
+BOUNDARY_COLUMN = FEATURES - 1
 CURVATURE_SCALE_M = 0.05  # mean curvature read as asinh(H · 5 cm): ~linear up to a wrist's bend, a finger's ~2
 
 
@@ -52,6 +53,13 @@ class PartInputs:
     @property
     def vertices(self) -> int:
         return len(self.mass)
+
+    @property
+    def ragged(self) -> float:
+        """The share of the part's area on its boundary vertices (the features' last column):
+        ~0.1–0.2 for a camera view's ragged outline and occlusion holes, ~0.02 for a compact region."""
+        boundary = self.features[:, BOUNDARY_COLUMN] > 0
+        return float(self.mass[boundary].sum(dtype=np.float64) / self.mass.sum(dtype=np.float64))
 
     def feeds(self) -> dict[str, np.ndarray]:
         """The graph's inputs by their contract names."""

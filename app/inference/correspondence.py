@@ -36,13 +36,16 @@ from app.inference.template import RegionBoundaries, Template
 HEAT_TIME_M2 = 1.25e-3
 COVERED_DENSITY = 0.35
 SCALE_ITERATIONS = 3
-# A template vertex's covered share is that density at the part's scale over FULL_DENSITY,
+# A template vertex's covered share is that density at the part's scale over the full density,
 # capped at 1: per-body-part coverage sums it, not the region. The region counts the whole area
 # between a ragged view's strips (its coverage 4 points too high on camera views), the density
 # alone leaves a compact part's interior short of full where the heat step carried its outline's
-# area out. Chosen on the validation pairs' parts, the value whose worse set (random regions or
-# camera views) erred least (decision 022).
-FULL_DENSITY = 0.9
+# area out. The full density grows with how ragged the part is, the share of its area on its
+# boundary vertices (a ragged view's density spills into its gaps): FULL_DENSITY +
+# FULL_DENSITY_PER_RAGGED × that share, chosen on validation draws of the training people (every
+# delivery, views and regions) as the line whose worst set erred least (decisions 022, 025).
+FULL_DENSITY = 0.75
+FULL_DENSITY_PER_RAGGED = 2.0
 
 
 # The graph's metadata key: a union step is told the overlap and boundary share its operands'
@@ -59,6 +62,7 @@ class Placement:
     confidence: np.ndarray  # (n,) probability of the template patch it was placed in
     vertex: np.ndarray  # (n,) the template vertex nearest to its position
     area: np.ndarray  # (n,) the part's own area at each vertex, m²
+    ragged: float  # the share of its area on its boundary vertices (PartInputs.ragged)
 
     @property
     def mean_confidence(self) -> float:
@@ -101,10 +105,11 @@ class TemplateRegions:
         landed = np.bincount(vertex, weights=area, minlength=len(self.vertex_area))
         return self.heat.solve(landed) if landed.any() else landed
 
-    def cover(self, vertex: np.ndarray, area: np.ndarray) -> Cover:
+    def cover(self, vertex: np.ndarray, area: np.ndarray, ragged: float = 0.0) -> Cover:
         """What a part covers: its region (see :data:`COVERED_DENSITY`) and each vertex's share
-        (:data:`FULL_DENSITY`); the template vertices its places land on, fully, where no vertex
-        is dense enough (a part of a few vertices)."""
+        (:data:`FULL_DENSITY`, for a part with ``ragged`` of its area on its boundary); the
+        template vertices its places land on, fully, where no vertex is dense enough (a part of a
+        few vertices)."""
         density = self.density(vertex, area)
         total, scale = float(area.sum()), 1.0
         region = density >= COVERED_DENSITY
@@ -114,7 +119,8 @@ class TemplateRegions:
             scale = total / float(self.vertex_area[region].sum())
             region = density >= COVERED_DENSITY * scale
         if region.any():
-            return Cover(region, np.clip(density / (FULL_DENSITY * scale), 0.0, 1.0))
+            full = FULL_DENSITY + FULL_DENSITY_PER_RAGGED * ragged
+            return Cover(region, np.clip(density / (full * scale), 0.0, 1.0))
         landed = np.zeros(len(self.vertex_area), bool)
         landed[vertex] = True
         return Cover.of_region(landed)
@@ -195,11 +201,12 @@ class CorrespondenceModel:
         """A part's places as the graph gave them, with each one's nearest template vertex."""
         position = places.position.astype(np.float64)
         nearest = self.regions.nearest(position)
-        return Placement(position, places.confidence.astype(np.float64), nearest, inputs.mass.astype(np.float64))
+        confidence = places.confidence.astype(np.float64)
+        return Placement(position, confidence, nearest, inputs.mass.astype(np.float64), inputs.ragged)
 
     def cover(self, placement: Placement) -> Cover:
         """What the placed part covers on the template."""
-        return self.regions.cover(placement.vertex, placement.area)
+        return self.regions.cover(placement.vertex, placement.area, placement.ragged)
 
     def placed(self, inputs: PartInputs, places: Places | None = None) -> PlacedPart:
         """The part placed (by ``places`` a worker computed, else here) and what it covers."""
