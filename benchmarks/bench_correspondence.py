@@ -62,7 +62,7 @@ def _row(name: str, vertices: np.ndarray, faces: np.ndarray | None, one, two, re
         }
     placement = one.place(inputs)
     runs |= {"graph1": lambda: one.place(inputs), "graph2": lambda: two.place(inputs)}
-    runs["region"] = lambda: one.region(placement)
+    runs["region"] = lambda: one.cover(placement)
     ms = interleaved_ms(runs, repeats)
     cell = lambda key: f"{ms[key]:.0f}" if key in ms else "—"  # noqa: E731
     print(
