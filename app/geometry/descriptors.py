@@ -55,11 +55,9 @@ class PartInputs:
         return len(self.mass)
 
     @property
-    def ragged(self) -> float:
-        """The share of the part's area on its boundary vertices (the features' last column):
-        ~0.1–0.2 for a camera view's ragged outline and occlusion holes, ~0.02 for a compact region."""
-        boundary = self.features[:, BOUNDARY_COLUMN] > 0
-        return float(self.mass[boundary].sum(dtype=np.float64) / self.mass.sum(dtype=np.float64))
+    def boundary(self) -> np.ndarray:
+        """(n,) bool: the part's boundary vertices (the features' last column)."""
+        return self.features[:, BOUNDARY_COLUMN] > 0
 
     def feeds(self) -> dict[str, np.ndarray]:
         """The graph's inputs by their contract names."""

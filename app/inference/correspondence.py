@@ -36,16 +36,21 @@ from app.inference.template import RegionBoundaries, Template
 HEAT_TIME_M2 = 1.25e-3
 COVERED_DENSITY = 0.35
 SCALE_ITERATIONS = 3
+# A part's boundary vertices are placed worst (8.4 cm off within one edge of a camera view's
+# boundary, 2.9 cm eight edges in: decision 019), so their area counts this much in its placed
+# density (chosen on validation draws of the training people, every delivery, views and regions,
+# as the weight whose worst set's region IoU was highest: decision 025).
+BOUNDARY_WEIGHT = 0.2
 # A template vertex's covered share is that density at the part's scale over the full density,
 # capped at 1: per-body-part coverage sums it, not the region. The region counts the whole area
 # between a ragged view's strips (its coverage 4 points too high on camera views), the density
 # alone leaves a compact part's interior short of full where the heat step carried its outline's
 # area out. The full density grows with how ragged the part is, the share of its area on its
 # boundary vertices (a ragged view's density spills into its gaps): FULL_DENSITY +
-# FULL_DENSITY_PER_RAGGED × that share, chosen on validation draws of the training people (every
-# delivery, views and regions) as the line whose worst set erred least (decisions 022, 025).
+# FULL_DENSITY_PER_RAGGED × that share, chosen on the same draws as the line whose worst set
+# erred least (decisions 022, 025).
 FULL_DENSITY = 0.75
-FULL_DENSITY_PER_RAGGED = 2.0
+FULL_DENSITY_PER_RAGGED = 1.0
 
 
 # The graph's metadata key: a union step is told the overlap and boundary share its operands'
@@ -62,7 +67,7 @@ class Placement:
     confidence: np.ndarray  # (n,) probability of the template patch it was placed in
     vertex: np.ndarray  # (n,) the template vertex nearest to its position
     area: np.ndarray  # (n,) the part's own area at each vertex, m²
-    ragged: float  # the share of its area on its boundary vertices (PartInputs.ragged)
+    boundary: np.ndarray  # (n,) bool: its boundary vertices
 
     @property
     def mean_confidence(self) -> float:
@@ -105,13 +110,16 @@ class TemplateRegions:
         landed = np.bincount(vertex, weights=area, minlength=len(self.vertex_area))
         return self.heat.solve(landed) if landed.any() else landed
 
-    def cover(self, vertex: np.ndarray, area: np.ndarray, ragged: float = 0.0) -> Cover:
+    def cover(self, vertex: np.ndarray, area: np.ndarray, boundary: np.ndarray | None = None) -> Cover:
         """What a part covers: its region (see :data:`COVERED_DENSITY`) and each vertex's share
-        (:data:`FULL_DENSITY`, for a part with ``ragged`` of its area on its boundary); the
-        template vertices its places land on, fully, where no vertex is dense enough (a part of a
-        few vertices)."""
-        density = self.density(vertex, area)
-        total, scale = float(area.sum()), 1.0
+        (:data:`FULL_DENSITY`), its ``boundary`` vertices' area counted by
+        :data:`BOUNDARY_WEIGHT`; the template vertices its places land on, fully, where no vertex
+        is dense enough (a part of a few vertices)."""
+        on_boundary = np.zeros(len(area), bool) if boundary is None else boundary
+        weight = np.where(on_boundary, BOUNDARY_WEIGHT * area, area)
+        ragged = float(area[on_boundary].sum() / area.sum())
+        density = self.density(vertex, weight)
+        total, scale = float(weight.sum()), 1.0
         region = density >= COVERED_DENSITY
         for _ in range(SCALE_ITERATIONS):
             if not region.any():
@@ -202,11 +210,11 @@ class CorrespondenceModel:
         position = places.position.astype(np.float64)
         nearest = self.regions.nearest(position)
         confidence = places.confidence.astype(np.float64)
-        return Placement(position, confidence, nearest, inputs.mass.astype(np.float64), inputs.ragged)
+        return Placement(position, confidence, nearest, inputs.mass.astype(np.float64), inputs.boundary)
 
     def cover(self, placement: Placement) -> Cover:
         """What the placed part covers on the template."""
-        return self.regions.cover(placement.vertex, placement.area, placement.ragged)
+        return self.regions.cover(placement.vertex, placement.area, placement.boundary)
 
     def placed(self, inputs: PartInputs, places: Places | None = None) -> PlacedPart:
         """The part placed (by ``places`` a worker computed, else here) and what it covers."""

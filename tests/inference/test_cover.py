@@ -32,20 +32,27 @@ def regions() -> TemplateRegions:
 @pytest.fixture(scope="module")
 def placed(regions) -> tuple[np.ndarray, Cover]:
     """The upper 40 % of the template, every vertex placed on itself with its own area, its
-    raggedness its own (the share of its area on its boundary vertices, as PartInputs reads it)."""
+    boundary vertices flagged as PartInputs flags them."""
+    mask = upper(regions)
+    return mask, regions.cover(np.flatnonzero(mask), regions.vertex_area[mask], outline(mask)[mask])
+
+
+def upper(regions: TemplateRegions) -> np.ndarray:
     height = regions.tree.data[:, 2]
-    mask = height >= np.quantile(height, 0.6)
-    template = Template.load(MODELS)
-    boundary = boundary_vertex_mask(template.faces[mask[template.faces].all(axis=1)], len(mask))
-    area = regions.vertex_area
-    return mask, regions.cover(np.flatnonzero(mask), area[mask], float(area[boundary].sum() / area[mask].sum()))
+    return height >= np.quantile(height, 0.6)
+
+
+def outline(mask: np.ndarray) -> np.ndarray:
+    """(n,) bool: the boundary vertices of the template's faces inside ``mask``."""
+    faces = Template.load(MODELS).faces
+    return boundary_vertex_mask(faces[mask[faces].all(axis=1)], len(mask))
 
 
 def test_a_region_placed_exactly_is_covered_by_its_own_area(regions, placed):
     mask, cover = placed
     area = regions.vertex_area
     assert cover.share.min() >= 0 and cover.share.max() <= 1
-    # measured +3.2 %: the outline, where the heat step leaves half the density, counts over the full one
+    # measured -0.3 % (+2.7 % with the outline's area counted in full)
     assert float(cover.share @ area) == pytest.approx(float(area[mask].sum()), rel=0.04)
     points = regions.tree.data
     depth, _ = cKDTree(points[~mask]).query(points[mask])
@@ -94,13 +101,19 @@ def test_the_union_s_cover_is_the_union_of_regions_and_the_larger_share():
     np.testing.assert_array_equal(both.share, [1.0, 1.0, 0.1])
 
 
-def test_a_ragged_part_s_share_is_read_against_a_higher_full_density(regions, placed):
-    """The same places read as a ragged part (a camera view's outline, its density spilling into
-    its gaps) cover less of the template than as a compact one, and never more than its region."""
-    mask, _ = placed
-    index, area = np.flatnonzero(mask), regions.vertex_area[mask]
-    compact, ragged = regions.cover(index, area, 0.0), regions.cover(index, area, 0.2)
-    np.testing.assert_array_equal(compact.region, ragged.region)
-    assert np.all(ragged.share <= compact.share) and float(ragged.share @ regions.vertex_area) < float(
-        compact.share @ regions.vertex_area
-    )
+def test_an_outline_placed_astray_covers_less_where_it_landed(regions):
+    """A part's boundary vertices are placed worst: the upper 40 % with its outline's places sent
+    to the feet covers less there flagged as outline than read as interior (measured 0.0056
+    against 0.0113 m² of region, 0.0050 against 0.0125 m² of shares)."""
+    mask = upper(regions)
+    height = regions.tree.data[:, 2]
+    index, area, flags = np.flatnonzero(mask), regions.vertex_area[mask], outline(mask)[mask]
+    feet = np.flatnonzero(height <= np.quantile(height, 0.05))
+    astray = index.copy()
+    astray[flags] = feet[np.arange(flags.sum()) % len(feet)]
+    low = height <= np.quantile(height, 0.1)
+    read = {name: regions.cover(astray, area, given) for name, given in (("interior", None), ("outline", flags))}
+    region_there = {name: float(regions.vertex_area[cover.region & low].sum()) for name, cover in read.items()}
+    share_there = {name: float(cover.share[low] @ regions.vertex_area[low]) for name, cover in read.items()}
+    assert region_there["outline"] < 0.7 * region_there["interior"]
+    assert share_there["outline"] < 0.7 * share_there["interior"]

@@ -133,7 +133,7 @@ def evaluate_correspondence(parts_dir: Path, graph: Path, models: Path) -> dict:
             localized = served.localize(spectrum).vertices if np.isfinite(spectrum).all() else np.arange(n)
             localized_mask = np.zeros(n, bool)
             localized_mask[localized] = True
-            perfect = model.regions.cover(part["target"], placement.area).region
+            perfect = model.regions.cover(part["target"], placement.area, placement.boundary).region
             rows[str(part["variant"])].append(
                 score_part(part, placement, cover, truth, localized_mask, perfect, template, served.vertex_area)
             )
