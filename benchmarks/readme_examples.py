@@ -41,9 +41,9 @@ UNION_THEN = "(the union's fields as above, then:)\n"
 
 
 def rounded(value):
-    """Numbers to three decimals, recursively."""
+    """Numbers to three decimals, recursively (a closed surface's λ₁, ±1e-15, shown as 0.0, not -0.0)."""
     if isinstance(value, float):
-        return round(value, 3)
+        return round(value, 3) + 0.0
     if isinstance(value, list):
         return [rounded(v) for v in value]
     if isinstance(value, dict):
