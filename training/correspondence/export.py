@@ -1,8 +1,8 @@
 """ONNX export of the correspondence network, and its parity with PyTorch.
 
 The graph takes one part (the contract's inputs, :data:`app.contract.CORRESPONDENCE_INPUTS`)
-with its vertex count, stencil width and basis size all dynamic, and applies the gradient
-stencil by gather (the form the service feeds).
+with its vertex count, stencil width and basis size all dynamic; it takes the gradient of the
+basis once, by gather (the stencil's form the service feeds), and each block's gradients from it.
 """
 
 import copy

@@ -60,24 +60,20 @@ class DiffusionBlock(nn.Module):
         mass: torch.Tensor,
         basis: torch.Tensor,
         eigenvalues: torch.Tensor,
-        neighbours: torch.Tensor,
-        weights: torch.Tensor,
-        stencil: "StencilMatrices | None" = None,
+        gradient: "BasisGradient | StencilMatrices",
     ) -> torch.Tensor:
         spectral = basis.transpose(0, 1) @ (mass[:, None] * x)  # (k, C)
         decay = torch.exp(-eigenvalues[:, None] * torch.exp(self.log_time)[None])
-        diffused = basis @ (decay * spectral)  # (n, C)
-        if stencil is None:  # the exported graph: a gather and a batched product (ONNX has no sparse one)
-            # Σ_j w_ij (f_j − f_i) for both components in one batched product: the differences
-            # are read once, where two products and two sums read them twice each.
-            both = weights.transpose(1, 2) @ (diffused[neighbours] - diffused[:, None])  # (n, 2, C)
-            gx, gy = both[:, 0], both[:, 1]
-        else:  # training: the same operator as sparse matrices, whose backward is a product too
-            gx, gy = torch.sparse.mm(stencil.x, diffused), torch.sparse.mm(stencil.y, diffused)
+        coefficients = decay * spectral
+        if isinstance(gradient, StencilMatrices):  # training: the stencil applied to the diffused channels
+            diffused = basis @ coefficients  # (n, C)
+            gx, gy = torch.sparse.mm(gradient.x, diffused), torch.sparse.mm(gradient.y, diffused)
+        else:  # the exported graph: the same gradients expanded from the basis's own, one product
+            diffused, gx, gy = gradient.stacked @ coefficients  # (3, n, C)
         bx = self.gradient_real(gx) - self.gradient_imaginary(gy)
         by = self.gradient_real(gy) + self.gradient_imaginary(gx)
-        gradient = torch.tanh(gx * bx + gy * by)
-        return x + self.mlp(torch.cat([x, diffused, gradient], dim=1))
+        gradient_features = torch.tanh(gx * bx + gy * by)
+        return x + self.mlp(torch.cat([x, diffused, gradient_features], dim=1))
 
 
 class Heads(NamedTuple):
@@ -104,9 +100,10 @@ class CorrespondenceNet(nn.Module):
     def heads(self, features, mass, basis, eigenvalues, neighbours, weights, stencil=None) -> Heads:
         """Each vertex's patch scores and offset; ``stencil``: the gradient stencil as sparse
         matrices (:func:`stencil_matrices`), for training."""
+        gradient = stencil if stencil is not None else basis_gradient(basis, neighbours, weights)
         x = self.first(features)
         for block in self.blocks:
-            x = block(x, mass, basis, eigenvalues, neighbours, weights, stencil)
+            x = block(x, mass, basis, eigenvalues, gradient)
         return Heads(self.head(x), self.config.offset_m * torch.tanh(self.offset(x)))
 
     def place(self, heads: Heads) -> tuple[torch.Tensor, torch.Tensor]:
@@ -141,6 +138,23 @@ def stencil_matrices(neighbours: torch.Tensor, weights: torch.Tensor) -> Stencil
         return torch.sparse_coo_tensor(index, values, (n, n)).coalesce().to_sparse_csr()
 
     return StencilMatrices(matrix(weights[..., 0]), matrix(weights[..., 1]))
+
+
+class BasisGradient(NamedTuple):
+    """The basis and the gradient stencil applied to it, stacked (3, n, k): each block's diffused
+    channels and their two gradient components are then one product with its coefficients."""
+
+    stacked: torch.Tensor
+
+
+def basis_gradient(basis: torch.Tensor, neighbours: torch.Tensor, weights: torch.Tensor) -> BasisGradient:
+    """Σ_j w_ij (φ_j − φ_i) for every basis function, by gather (ONNX has no sparse product).
+
+    The stencil is linear, so the gradient of a diffused channel Φc is (∇Φ)c: the n × width
+    differences, the costliest read of the exported graph, are gathered once per part (from the
+    k basis functions) rather than once per block (from its channels); decision 026."""
+    both = weights.transpose(1, 2) @ (basis[neighbours] - basis[:, None])  # (n, 2, k)
+    return BasisGradient(torch.stack([basis, both[:, 0], both[:, 1]]))
 
 
 def template_patches(vertices: np.ndarray, faces: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:

@@ -1,4 +1,4 @@
-"""The correspondence network: its two stencil paths agree, it learns, and its ONNX graph matches
+"""The correspondence network: its two gradient paths agree, it learns, and its ONNX graph matches
 PyTorch on parts of other sizes than the one it was traced on (no anny: an irregular curved
 patch, with no symmetry to hide a place, is the template)."""
 
@@ -16,7 +16,7 @@ from app.geometry.topology import drop_unreferenced, referenced  # noqa: E402
 from app.inference.template import Template, faces_inside  # noqa: E402
 from tests.conftest import bumpy_patch  # noqa: E402
 from training.correspondence.export import correspondence_parity, export_correspondence, training_path  # noqa: E402
-from training.correspondence.net import CorrespondenceConfig, stencil_matrices  # noqa: E402
+from training.correspondence.net import CorrespondenceConfig, basis_gradient, stencil_matrices  # noqa: E402
 from training.correspondence.train import TrainingPreset, restored, torch_inputs, train  # noqa: E402
 from training.onnx_export import relative_difference  # noqa: E402
 
@@ -40,7 +40,23 @@ def _parts_dir(root: Path) -> Path:
     return root
 
 
-def test_the_sparse_and_gathered_stencils_give_one_network(tmp_path):
+def test_the_basis_gradient_is_the_stencil_applied_to_each_function(tmp_path):
+    """The exported graph's gathered gradient of the basis against the training path's sparse
+    stencil, in float64: the same linear operator, so equal to rounding."""
+    part = dict(np.load(next((_parts_dir(tmp_path) / "parts").glob("*.npz"))))
+    basis = torch.as_tensor(part["basis"], dtype=torch.float64)
+    neighbours, weights = torch.as_tensor(part["neighbours"]), torch.as_tensor(part["weights"], dtype=torch.float64)
+    stacked = basis_gradient(basis, neighbours, weights).stacked
+    stencil = stencil_matrices(neighbours, weights)
+    assert torch.equal(stacked[0], basis)
+    torch.testing.assert_close(stacked[1], torch.sparse.mm(stencil.x, basis), rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(stacked[2], torch.sparse.mm(stencil.y, basis), rtol=1e-12, atol=1e-12)
+    assert stacked[1:].abs().max() > 1.0  # a gradient, not zeros
+
+
+def test_the_sparse_stencil_and_the_basis_gradient_give_one_network(tmp_path):
+    """Training applies the stencil to each block's diffused channels; the exported graph expands
+    the basis's gradient by each block's coefficients: one network either way."""
     part = dict(np.load(next((_parts_dir(tmp_path) / "parts").glob("*.npz"))))
     from training.correspondence.net import CorrespondenceNet
 
