@@ -25,7 +25,7 @@ from app.geometry.shapes import Mesh
 from app.inference.correspondence import CorrespondenceModel
 from app.inference.models import SpectralModels
 from app.samples import PARTS, template_part
-from benchmarks.bench_spectrum import interleaved_ms
+from training.timing import interleaved_ms
 
 
 def main() -> None:

@@ -23,9 +23,6 @@ request at a time, beside LaPy-CHOLMOD in this process.
 """
 
 import argparse
-import statistics
-import time
-from collections.abc import Callable
 from functools import partial
 
 import fast_simplification
@@ -40,6 +37,7 @@ from app.geometry.pencil import ShiftedPencil
 from app.geometry.shapes import Mesh
 from app.geometry.spectrum import eigenpairs, eigenvalues, shift_for
 from app.geometry.topology import boundary_vertex_mask, drop_unreferenced, largest_component
+from training.timing import interleaved_ms
 
 
 def anny_body() -> Mesh:
@@ -83,18 +81,6 @@ def bodies(large: bool) -> dict[str, tuple[Mesh, np.ndarray | None]]:
         fine = trimesh.Trimesh(body.vertices, body.faces, process=False).subdivide()
         shapes["closed body, subdivided"] = (Mesh(np.asarray(fine.vertices), np.asarray(fine.faces)), None)
     return shapes
-
-
-def interleaved_ms(runs: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
-    """Median milliseconds of each run, the runs taking turns within every repeat, so that a
-    drift in the machine's speed (this VM's varies by ~30 % over minutes) weighs on all alike."""
-    times: dict[str, list[float]] = {name: [] for name in runs}
-    for _ in range(repeats):
-        for name, run in runs.items():
-            started = time.perf_counter()
-            run()
-            times[name].append(time.perf_counter() - started)
-    return {name: 1e3 * statistics.median(values) for name, values in times.items()}
 
 
 def scipy_reference(mesh: Mesh, fixed: np.ndarray | None, k: int) -> np.ndarray:

@@ -8,7 +8,14 @@ from pathlib import Path
 from training.correspondence import card as correspondence_card
 from training.glance import BEGIN as GLANCE_BEGIN
 from training.glance import END as GLANCE_END
-from training.glance import part_coverage_row, render_glance, same_region_row, session_pair_row, unseen_types_row
+from training.glance import (
+    part_coverage_row,
+    placing_cost_row,
+    render_glance,
+    same_region_row,
+    session_pair_row,
+    unseen_types_row,
+)
 from training.learning.card import BEGIN, END, EVALUATION, render, render_summary
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
@@ -101,3 +108,13 @@ def test_the_coverage_goal_is_judged_on_every_camera_delivery():
     assert part_coverage_row(metrics)[3] is True
     views["cloud"]["coverage_error"] = 5.2
     assert part_coverage_row(metrics)[3] is False
+
+
+def test_the_placing_cost_goal_is_met_at_300_ms_and_missed_above():
+    """The card's goal row and the at-a-glance row judge the measured total alike."""
+    metrics = json.loads((MODELS / "correspondence.json").read_text())
+    for total, met in ((300.0, True), (301.0, False)):
+        metrics["cost"]["total_ms"] = total
+        assert placing_cost_row(metrics)[3] is met
+        row = next(line for line in correspondence_card.goals(metrics) if "placed in ≤ 300 ms" in line)
+        assert row.endswith("| yes |" if met else "| **no** |")

@@ -16,6 +16,7 @@ from app.inference.correspondence import TELL_BELOW_KEY
 from app.inference.manifest import write_manifest
 from app.inference.nesting import NESTED_BELOW_KEY
 from training.correspondence.card import BEGIN, END, render
+from training.correspondence.cost import part_cost
 from training.correspondence.evaluate import evaluate_correspondence, evaluate_pairs
 from training.correspondence.export import correspondence_parity, export_correspondence
 from training.correspondence.train import TRAINING_PRESETS, load_parts, restored, train
@@ -43,6 +44,7 @@ def run_correspondence_pipeline(
         "parts": evaluate_correspondence(parts_dir, graph, models),
         "pairs": pairs,
         "parity_max_relative": correspondence_parity(model, graph, checks),
+        "cost": part_cost(graph, models),
         "training": checkpoint["training"] | {"seconds": round(checkpoint["seconds"], 1)},
         "build": json.loads((parts_dir / "parts.json").read_text()),
         "seconds": {"training": round(trained - started, 1), "total": round(time.perf_counter() - started, 1)},
