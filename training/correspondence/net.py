@@ -62,14 +62,14 @@ class DiffusionBlock(nn.Module):
         eigenvalues: torch.Tensor,
         gradient: "BasisGradient | StencilMatrices",
     ) -> torch.Tensor:
-        spectral = basis.transpose(0, 1) @ (mass[:, None] * x)  # (k, C)
         decay = torch.exp(-eigenvalues[:, None] * torch.exp(self.log_time)[None])
-        coefficients = decay * spectral
         if isinstance(gradient, StencilMatrices):  # training: the stencil applied to the diffused channels
+            coefficients = decay * (basis.transpose(0, 1) @ (mass[:, None] * x))  # (k, C)
             diffused = basis @ coefficients  # (n, C)
             gx, gy = torch.sparse.mm(gradient.x, diffused), torch.sparse.mm(gradient.y, diffused)
-        else:  # the exported graph: the same gradients expanded from the basis's own, one product
-            diffused, gx, gy = gradient.stacked @ coefficients  # (3, n, C)
+        else:  # the exported graph: the part's operators taken once, each a product with the channels
+            coefficients = decay * (gradient.projection @ x)
+            diffused, gx, gy = basis @ coefficients, gradient.x @ coefficients, gradient.y @ coefficients
         bx = self.gradient_real(gx) - self.gradient_imaginary(gy)
         by = self.gradient_real(gy) + self.gradient_imaginary(gx)
         gradient_features = torch.tanh(gx * bx + gy * by)
@@ -100,7 +100,7 @@ class CorrespondenceNet(nn.Module):
     def heads(self, features, mass, basis, eigenvalues, neighbours, weights, stencil=None) -> Heads:
         """Each vertex's patch scores and offset; ``stencil``: the gradient stencil as sparse
         matrices (:func:`stencil_matrices`), for training."""
-        gradient = stencil if stencil is not None else basis_gradient(basis, neighbours, weights)
+        gradient = stencil if stencil is not None else basis_gradient(basis, mass, neighbours, weights)
         x = self.first(features)
         for block in self.blocks:
             x = block(x, mass, basis, eigenvalues, gradient)
@@ -141,20 +141,25 @@ def stencil_matrices(neighbours: torch.Tensor, weights: torch.Tensor) -> Stencil
 
 
 class BasisGradient(NamedTuple):
-    """The basis and the gradient stencil applied to it, stacked (3, n, k): each block's diffused
-    channels and their two gradient components are then one product with its coefficients."""
+    """What the exported graph takes of a part once: the projection onto its basis with the mass
+    (k, n), and the gradient stencil applied to each basis function, x and y (n, k)."""
 
-    stacked: torch.Tensor
+    projection: torch.Tensor
+    x: torch.Tensor
+    y: torch.Tensor
 
 
-def basis_gradient(basis: torch.Tensor, neighbours: torch.Tensor, weights: torch.Tensor) -> BasisGradient:
-    """Σ_j w_ij (φ_j − φ_i) for every basis function, by gather (ONNX has no sparse product).
+def basis_gradient(
+    basis: torch.Tensor, mass: torch.Tensor, neighbours: torch.Tensor, weights: torch.Tensor
+) -> BasisGradient:
+    """Σ_j w_ij (φ_j − φ_i) for every basis function, by gather (ONNX has no sparse product),
+    and (MΦ)ᵀ.
 
     The stencil is linear, so the gradient of a diffused channel Φc is (∇Φ)c: the n × width
     differences, the costliest read of the exported graph, are gathered once per part (from the
     k basis functions) rather than once per block (from its channels); decision 026."""
     both = weights.transpose(1, 2) @ (basis[neighbours] - basis[:, None])  # (n, 2, k)
-    return BasisGradient(torch.stack([basis, both[:, 0], both[:, 1]]))
+    return BasisGradient((mass[:, None] * basis).transpose(0, 1), both[:, 0], both[:, 1])
 
 
 def template_patches(vertices: np.ndarray, faces: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:

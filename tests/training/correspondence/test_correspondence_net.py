@@ -42,16 +42,17 @@ def _parts_dir(root: Path) -> Path:
 
 def test_the_basis_gradient_is_the_stencil_applied_to_each_function(tmp_path):
     """The exported graph's gathered gradient of the basis against the training path's sparse
-    stencil, in float64: the same linear operator, so equal to rounding."""
+    stencil, and its projection against the mass-weighted transpose, in float64: equal to rounding."""
     part = dict(np.load(next((_parts_dir(tmp_path) / "parts").glob("*.npz"))))
-    basis = torch.as_tensor(part["basis"], dtype=torch.float64)
+    basis, mass = (torch.as_tensor(part[name], dtype=torch.float64) for name in ("basis", "mass"))
     neighbours, weights = torch.as_tensor(part["neighbours"]), torch.as_tensor(part["weights"], dtype=torch.float64)
-    stacked = basis_gradient(basis, neighbours, weights).stacked
+    taken = basis_gradient(basis, mass, neighbours, weights)
     stencil = stencil_matrices(neighbours, weights)
-    assert torch.equal(stacked[0], basis)
-    torch.testing.assert_close(stacked[1], torch.sparse.mm(stencil.x, basis), rtol=1e-12, atol=1e-12)
-    torch.testing.assert_close(stacked[2], torch.sparse.mm(stencil.y, basis), rtol=1e-12, atol=1e-12)
-    assert stacked[1:].abs().max() > 1.0  # a gradient, not zeros
+    torch.testing.assert_close(taken.x, torch.sparse.mm(stencil.x, basis), rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(taken.y, torch.sparse.mm(stencil.y, basis), rtol=1e-12, atol=1e-12)
+    assert min(taken.x.abs().max(), taken.y.abs().max()) > 1.0  # gradients, not zeros
+    eye = torch.eye(basis.shape[1], dtype=torch.float64)
+    torch.testing.assert_close(taken.projection @ basis, eye, rtol=0, atol=1e-5)  # M-orthonormal (stored in float32)
 
 
 def test_the_sparse_stencil_and_the_basis_gradient_give_one_network(tmp_path):
