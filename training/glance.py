@@ -185,7 +185,8 @@ def placing_cost_row(metrics: dict) -> Row:
     """What the evaluation measured placing the sample part cost, on the machine that ran it."""
     cost = metrics["cost"]
     return (
-        f"placing a {cost['vertices']}-vertex part, its eigenbasis included ({cost['threads']} thread, as served)",
+        f"placing a {cost['vertices'] // 1000} k-vertex part, its eigenbasis included "
+        f"({cost['threads']} thread, as served)",
         f"{cost['total_ms']:.0f} ms",
         "≤ 300 ms",
         cost["total_ms"] <= 300,

@@ -80,8 +80,9 @@ def render(metrics: dict, command: str) -> str:
 
 def cost_line(cost: dict) -> str:
     """What placing the sample part cost on the machine that ran the evaluation."""
+    vertices = format(cost["vertices"], ",").replace(",", " ")
     return (
-        f"Placing a {cost['vertices']}-vertex part (`{cost['part']}`, the README's sample) cost "
+        f"Placing a {vertices}-vertex part (`{cost['part']}`, the README's sample) cost "
         f"{cost['total_ms']:.0f} ms on the machine that ran this evaluation, beyond its own spectrum: Laplacian "
         f"{cost['laplacian_ms']:.0f}, eigenbasis and the other inputs {cost['inputs_ms']:.0f}, graph "
         f"{cost['graph_ms']:.0f}, region {cost['region_ms']:.0f}, on {cost['threads']} thread as a solver worker "
