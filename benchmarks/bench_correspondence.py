@@ -6,10 +6,9 @@ milliseconds (stages taking turns within every repeat) on the README's two sampl
 and ~11 k vertices) and a ~10 k-point cloud of the second: the Laplacian, the part's spectrum
 (k = 20, Dirichlet: what every upload already costs), the correspondence inputs (the k = 64
 free-boundary eigenbasis, the heat signature, outward winding and gradient stencil), the ONNX
-graph on one thread (as a solver worker runs it: the pool runs a worker per core; a second
-session with a thread pool alive beside it would slow it by its spinning), and the region;
-beside LaPy with CHOLMOD solving the same 64 eigenpairs (its strongest configuration), as the
-peer of the eigenbasis stage.
+graph on one thread (as a solver worker runs it: the pool runs a worker per core), and the
+region; beside LaPy with CHOLMOD solving the same 64 eigenpairs (its strongest configuration),
+as the peer of the eigenbasis stage.
 """
 
 import argparse
