@@ -15,6 +15,7 @@ import numpy as np
 import trimesh
 
 from app.geometry.pipeline import SpectrumOptions, spectrum_from_bytes
+from app.geometry.shapes import Mesh
 from app.inference.template import PART_NAMES, Template
 
 # File name → the body parts removed from the template (what each name says is missing).
@@ -42,6 +43,13 @@ def template_part(template: Template, removed: tuple[str, ...]) -> bytes:
     mesh = trimesh.Trimesh(template.vertices, template.faces[_kept_faces(template, removed)], process=False)
     mesh.remove_unreferenced_vertices()
     return mesh.export(file_type="ply")
+
+
+def template_part_mesh(template: Template, removed: tuple[str, ...]) -> Mesh:
+    """:func:`template_part` read back from its PLY bytes: the arrays an upload of that file
+    carries (float64 vertices, int64 faces), for timing and testing what the service does with it."""
+    mesh = trimesh.load(trimesh.util.wrap_as_stream(template_part(template, removed)), file_type="ply")
+    return Mesh(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64))
 
 
 def sample_overlap(template: Template) -> float:

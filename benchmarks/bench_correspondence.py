@@ -15,7 +15,6 @@ import argparse
 
 import lapy
 import numpy as np
-import trimesh
 
 from app.contract import CORRESPONDENCE_BASIS, CORRESPONDENCE_FILE
 from app.core.config import Settings
@@ -25,7 +24,7 @@ from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
 from app.inference.correspondence import CorrespondenceModel
 from app.inference.models import SpectralModels
-from app.samples import PARTS, template_part
+from app.samples import PARTS, template_part_mesh
 from training.timing import interleaved_ms
 
 
@@ -42,8 +41,8 @@ def main() -> None:
     )
     print("|---|---|---|---|---|---|---|")
     for name, removed in PARTS.items():
-        mesh = trimesh.load(trimesh.util.wrap_as_stream(template_part(models.template, removed)), file_type="ply")
-        vertices, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+        part = template_part_mesh(models.template, removed)
+        vertices, faces = part.vertices, part.faces
         _row(name, vertices, faces, model, args.repeats)
     _row("point cloud of " + name, vertices, None, model, args.repeats)
 

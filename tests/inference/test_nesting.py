@@ -10,20 +10,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import trimesh
 
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
-from app.geometry.shapes import Mesh
 from app.inference.models import SpectralModels
 from app.inference.nesting import Nesting, dominates, inner_confidence, nested_step
-from app.samples import template_part
+from app.samples import template_part_mesh
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 
 
 def _spectrum(models: SpectralModels, removed: tuple[str, ...]) -> np.ndarray:
-    mesh = trimesh.load(trimesh.util.wrap_as_stream(template_part(models.template, removed)), file_type="ply")
-    return np.asarray(mesh_spectrum(Mesh(mesh.vertices, mesh.faces), SpectrumOptions(k=models.k)).eigenvalues)
+    return np.asarray(
+        mesh_spectrum(template_part_mesh(models.template, removed), SpectrumOptions(k=models.k)).eigenvalues
+    )
 
 
 @pytest.fixture(scope="module")

@@ -10,6 +10,7 @@ SET_NAMES = {
     "test_b": "B: unseen people, random regions",
     "test_c": "C: unseen people, camera views",
 }
+PLACING_GOAL_MS = 300  # a ~10 k-vertex part placed, its eigenbasis included
 PAIR_NAMES = {"pairs_b": "B: region pairs, B in another pose", "pairs_c": "C: a session's views"}
 
 
@@ -121,9 +122,9 @@ def goals(metrics: dict) -> list[str]:
     cost = metrics["cost"]
     checks.append(
         (
-            f"a {cost['vertices'] // 1000} k-vertex part placed in ≤ 300 ms, its eigenbasis included",
+            f"a {cost['vertices'] // 1000} k-vertex part placed in ≤ {PLACING_GOAL_MS} ms, its eigenbasis included",
             f"{cost['total_ms']:.0f} ms",
-            cost["total_ms"] <= 300,
+            cost["total_ms"] <= PLACING_GOAL_MS,
         )
     )
     if nested is not None:

@@ -5,22 +5,20 @@ vertices), computed as a solver worker computes it: one BLAS thread and the grap
 (the service's pool runs a worker per core, so a 2-core machine places two parts at once). The
 stages are disjoint and take turns within every repeat: the Laplacian, the rest of the graph's
 inputs (the 64-function eigenbasis, heat signature, curvature, winding and stencil), the graph
-with each place's nearest template vertex, and the region with its shares. Its own k = 20 spectrum, which every upload
-costs anyway, is not counted. ``benchmarks/bench_correspondence.py`` times the same stages
-beside LaPy-CHOLMOD's eigenbasis.
+with each place's nearest template vertex, and the region with its shares. Its own k = 20
+spectrum, which every upload costs anyway, is not counted. ``benchmarks/bench_correspondence.py``
+times the same stages beside LaPy-CHOLMOD's eigenbasis.
 """
 
 from pathlib import Path
 
-import numpy as np
-import trimesh
 from threadpoolctl import threadpool_limits
 
 from app.geometry.descriptors import mesh_inputs
 from app.geometry.laplacian import mesh_operators
 from app.inference.correspondence import CorrespondenceModel
 from app.inference.models import SpectralModels
-from app.samples import PARTS, template_part
+from app.samples import PARTS, template_part_mesh
 from training.timing import interleaved_ms
 
 COST_PART = "no_left_forearm_hand.ply"
@@ -33,9 +31,8 @@ def part_cost(graph: Path, models: Path, repeats: int = COST_REPEATS) -> dict:
     total (``total_ms``)."""
     served = SpectralModels(models)
     model = CorrespondenceModel(graph, served.template_regions, COST_THREADS)
-    ply = template_part(served.template, PARTS[COST_PART])
-    mesh = trimesh.load(trimesh.util.wrap_as_stream(ply), file_type="ply", process=False)
-    vertices, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+    part = template_part_mesh(served.template, PARTS[COST_PART])
+    vertices, faces = part.vertices, part.faces
     operators = mesh_operators(vertices, faces)
     inputs = mesh_inputs(vertices, faces, operators=operators)
     placement = model.place(inputs)
