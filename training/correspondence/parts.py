@@ -78,7 +78,7 @@ PARTS_PRESETS = {
             train_identities=24,
             test_identities=8,
             poses=6,
-            train_parts=1800,
+            train_parts=3600,
             test_parts=40,
             test_pairs=60,
         ),
