@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from app.geometry.io import load_shape
 from app.geometry.pipeline import SpectrumOptions, spectrum_from_bytes
 from app.geometry.shapes import Mesh
 from app.inference.template import PART_NAMES, Template
@@ -46,10 +47,12 @@ def template_part(template: Template, removed: tuple[str, ...]) -> bytes:
 
 
 def template_part_mesh(template: Template, removed: tuple[str, ...]) -> Mesh:
-    """:func:`template_part` read back from its PLY bytes: the arrays an upload of that file
-    carries (float64 vertices, int64 faces), for timing and testing what the service does with it."""
-    mesh = trimesh.load(trimesh.util.wrap_as_stream(template_part(template, removed)), file_type="ply")
-    return Mesh(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64))
+    """:func:`template_part` read back by the service's own upload reader: the arrays an upload
+    of that file carries, for timing and testing what the service does with it."""
+    shape = load_shape(template_part(template, removed), "ply", max_vertices=len(template.vertices))
+    if not isinstance(shape, Mesh):
+        raise TypeError("a template part's PLY read back as a point cloud")
+    return shape
 
 
 def sample_overlap(template: Template) -> float:
