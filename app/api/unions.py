@@ -146,6 +146,7 @@ async def union_of_operands(
     seconds = time.perf_counter() - started
     INFERENCE.labels("union").observe(seconds)
     warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]
+    warnings += _doubts(models, operands, placed)
     warnings += size_warnings(values, [o.source for o in operands])
     return UnionOutcome(
         operands,
@@ -207,6 +208,18 @@ def _placed(models: SpectralModels, operands: list[Operand]) -> list[PlacedPart]
             INFERENCE.labels("correspondence").observe(operand.places.graph_ms / 1e3)
         placed.append(models.correspondence.placed(operand.part, operand.places))
     return placed
+
+
+def _doubts(models: SpectralModels, operands: list[Operand], placed: list[PlacedPart]) -> list[str]:
+    """A warning for each placed upload whose places are too uncertain to trust its region."""
+    if not placed:
+        return []
+    uploads = [operand for operand in operands if operand.part is not None]  # as _placed placed them
+    return [
+        f"{operand.source}: {warning}"
+        for operand, part in zip(uploads, placed, strict=True)
+        for warning in models.correspondence.doubts(part.placement)
+    ]
 
 
 def _carried_regions(text: str | None, spectra: str | None, models: SpectralModels) -> list[Cover] | None:

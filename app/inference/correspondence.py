@@ -57,6 +57,12 @@ FULL_DENSITY_PER_RAGGED = 1.0
 # regions measure (where the client told none) when the measured overlap is below this value,
 # chosen at export as the one whose unions erred least on validation pairs (0: never told).
 TELL_BELOW_KEY = "tell_overlap_below"
+# The graph's metadata key: a part whose area-weighted mean place confidence is below this value
+# is answered with a warning that its places are uncertain, chosen at export as the lowest
+# percentile of the validation pairs' parts (0: never). A part's mean confidence tracks its
+# region's IoU (correlation 0.9 on validation draws), and shapes that are no body part (a plane,
+# a torus, a capsule) are placed with a fifth of a body part's.
+UNCERTAIN_BELOW_KEY = "uncertain_below_confidence"
 
 
 @dataclass(frozen=True)
@@ -172,6 +178,7 @@ class PlacingGraph:
         metadata = self.session.get_modelmeta().custom_metadata_map
         self.tell_below = float(metadata.get(TELL_BELOW_KEY, 0.0))
         self.nested_below = float(metadata.get(NESTED_BELOW_KEY, 0.0))
+        self.uncertain_below = float(metadata.get(UNCERTAIN_BELOW_KEY, 0.0))
 
     def run(self, inputs: PartInputs) -> Places:
         started = time.perf_counter()
@@ -200,6 +207,7 @@ class CorrespondenceModel:
         self.regions = regions
         self.tell_below = self.graph.tell_below
         self.nested_below = self.graph.nested_below
+        self.uncertain_below = self.graph.uncertain_below
 
     def place(self, inputs: PartInputs) -> Placement:
         """Each vertex of a part (its inputs from app.geometry.descriptors) on the template."""
@@ -211,6 +219,18 @@ class CorrespondenceModel:
         nearest = self.regions.nearest(position)
         confidence = places.confidence.astype(np.float64)
         return Placement(position, confidence, nearest, inputs.mass.astype(np.float64), inputs.boundary)
+
+    def doubts(self, placement: Placement) -> list[str]:
+        """A warning where the part's places are too uncertain to trust its region (see
+        :data:`UNCERTAIN_BELOW_KEY`): what a front-end should show before it reads the coverage."""
+        confidence, below = placement.mean_confidence, self.uncertain_below
+        if confidence >= below:
+            return []
+        return [
+            f"its places on the template are uncertain (mean confidence {confidence:.2f}, below {below:.2f}, where "
+            "few body parts are placed): not part of a human body, or a view the model cannot place; its region, "
+            "coverage and measured overlaps are unreliable"
+        ]
 
     def cover(self, placement: Placement) -> Cover:
         """What the placed part covers on the template."""

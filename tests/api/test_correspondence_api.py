@@ -129,6 +129,47 @@ def test_bad_uploads_get_a_problem(client, data, status):
     assert answer.headers["content-type"] == "application/problem+json"
 
 
+def _ply(mesh: trimesh.Trimesh) -> bytes:
+    return ascii_ply(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+
+
+# Shapes no human scan is part of (sizes of a body's): the graph places them far less certainly
+# than the least certain held-out body parts.
+NOT_BODY_PARTS = {
+    "torus.ply": trimesh.creation.torus(0.2, 0.05, major_sections=64, minor_sections=32),
+    "capsule.ply": trimesh.creation.capsule(0.4, 0.05, count=[32, 32]),
+    "ball.ply": trimesh.creation.icosphere(4, 0.3),
+}
+
+
+@pytest.mark.parametrize("name", sorted(NOT_BODY_PARTS))
+def test_a_shape_that_is_no_body_part_is_placed_with_a_warning(client, samples, name):
+    """A torus, a capsule or a 30 cm ball is still answered (a statue is not refused), with a
+    warning that its places are uncertain; a part of the template body is answered without."""
+    answer = _correspond(client, name, _ply(NOT_BODY_PARTS[name])).json()
+    below = client.app.state.resources.require_models().correspondence.uncertain_below
+    assert answer["mean_confidence"] < below
+    assert any("uncertain" in warning for warning in answer["warnings"])
+    for sample, data in samples.items():
+        placed = _correspond(client, sample, data).json()
+        assert placed["mean_confidence"] >= below and placed["warnings"] == []
+
+
+@pytest.mark.parametrize("uncertain_below", [0.0, 1.01])
+def test_a_union_names_the_upload_whose_places_are_uncertain(client, samples, uncertain_below):
+    """Below the graph's threshold the union's warnings name each upload whose places are
+    uncertain (every place is, below 1.01), and at 0 none."""
+    correspondence = client.app.state.resources.require_models().correspondence
+    kept, correspondence.uncertain_below = correspondence.uncertain_below, uncertain_below
+    try:
+        files = [("files", (name, data)) for name, data in samples.items()]
+        warnings = client.post("/v1/union", files=files).json()["warnings"]
+    finally:
+        correspondence.uncertain_below = kept
+    doubted = [w.split(":")[0] for w in warnings if "its places on the template are uncertain" in w]
+    assert doubted == ([f"files[{i}] {name}" for i, name in enumerate(samples)] if uncertain_below > 1 else [])
+
+
 def test_without_the_graph_the_service_answers_as_before(tmp_path, samples):
     models = tmp_path / "models"
     shutil.copytree(Settings().models_dir, models)

@@ -4,6 +4,8 @@ pairs' overlaps and unions beside the trivial answers; each goal met or not."""
 
 from collections.abc import Callable
 
+from training.correspondence.evaluate import UNCERTAIN_PERCENTILE
+
 BEGIN, END = "<!-- correspondence:begin -->", "<!-- correspondence:end -->"
 SET_NAMES = {
     "test_a": "A: seen people, unseen poses",
@@ -24,11 +26,14 @@ def render(metrics: dict, command: str) -> str:
         "Parts placed on the template (means over parts; error: each vertex's place against its true rest-pose "
         "vertex, area-weighted; IoU area-weighted; coverage error: mean over the 16 body parts of the covered "
         "share's difference, points, as served: summed from each template vertex's covered share, the localizer's "
-        "from its region; true places: the same region rule fed each vertex's true place, the most it can reach).",
+        "from its region; true places: the same region rule fed each vertex's true place, the most it can reach; "
+        "warned: answered with the warning that the part's places are uncertain, its mean place confidence below "
+        f"{metrics['pairs']['uncertain_below']:.2f}, the least certain {UNCERTAIN_PERCENTILE:g} % of the validation "
+        "pairs' parts).",
         "",
         "| set | variant | parts | place error cm (centroid) | ≤ 5 / ≤ 10 cm | flips | IoU / mirror-allowed "
-        "| true places | whole body | spectral localizer (mirror-allowed) | coverage error (localizer) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| true places | whole body | spectral localizer (mirror-allowed) | coverage error (localizer) | warned |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, variants in metrics["parts"].items():
         for variant, row in variants.items():
@@ -37,7 +42,7 @@ def render(metrics: dict, command: str) -> str:
                 f"({row['centroid_error_cm']:.1f}) | {_pc(row['within_5'])} / {_pc(row['within_10'])} | "
                 f"{_pc(row['flipped'])} | {_pc(row['iou'])} / {_pc(row['iou_mirror'])} | "
                 f"{_pc(row['true_places_iou'])} | {_pc(row['whole_body_iou'])} | {_pc(row['localizer_iou_mirror'])} | "
-                f"{row['coverage_error']:.1f} ({row['localizer_coverage_error']:.1f}) |"
+                f"{row['coverage_error']:.1f} ({row['localizer_coverage_error']:.1f}) | {_pc(row['warned'])} |"
             )
     pairs = metrics["pairs"]
     lines += [

@@ -12,7 +12,9 @@ regions; C: unseen identities, camera views) and per variant (mesh, re-meshed, p
   one, beside the whole body (IoU = the true area share), the spectral localizer, and the same
   region rule fed each vertex's true place (the most the rule can reach with perfect places);
 - part-coverage error: mean absolute difference (points) of the 16 body parts' covered shares,
-  as served (from each template vertex's covered share; the localizer's from its region).
+  as served (from each template vertex's covered share; the localizer's from its region);
+- warned: parts answered with the warning that their places are uncertain (their mean
+  confidence below the graph's threshold, the lowest percentile of the validation pairs' parts).
 
 Pairs of parts of one person (:mod:`training.correspondence.pairs`): the overlap measured from
 the two reached regions against the true one, and the union told it or not, or told the pair
@@ -59,6 +61,7 @@ class PartScore:
     localizer_iou_mirror: float
     coverage_error: float
     localizer_coverage_error: float
+    warned: bool
 
 
 def region_scores(predicted: np.ndarray, truth: np.ndarray, template: Template, area: np.ndarray) -> tuple:
@@ -86,9 +89,10 @@ def score_part(
     perfect: np.ndarray,
     template: Template,
     vertex_area: np.ndarray,
+    warned: bool,
 ) -> PartScore:
     """One part's figures (see the module docstring); ``perfect``: the region the rule reads
-    from the part's true places."""
+    from the part's true places; ``warned``: whether its answer warns of uncertain places."""
     rest = template.vertices
     weight = part["mass"] / part["mass"].sum()
     target = part["target"]
@@ -110,6 +114,7 @@ def score_part(
         localizer_iou_mirror=float(mirror.iou[1]),
         coverage_error=100 * coverage_error(cover.share, truth, template, vertex_area),
         localizer_coverage_error=100 * float(plain.coverage_error[1]),
+        warned=warned,
     )
 
 
@@ -135,7 +140,17 @@ def evaluate_correspondence(parts_dir: Path, graph: Path, models: Path) -> dict:
             localized_mask[localized] = True
             perfect = model.regions.cover(part["target"], placement.area, placement.boundary).region
             rows[str(part["variant"])].append(
-                score_part(part, placement, cover, truth, localized_mask, perfect, template, served.vertex_area)
+                score_part(
+                    part,
+                    placement,
+                    cover,
+                    truth,
+                    localized_mask,
+                    perfect,
+                    template,
+                    served.vertex_area,
+                    bool(model.doubts(placement)),
+                )
             )
         table[name] = {variant: _mean(scores) for variant, scores in rows.items() if scores}
     return table
@@ -147,12 +162,16 @@ TELL_THRESHOLDS = (0.0, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 1.01)
 # The thresholds tried for telling a pair nested: where its inner candidate's mean place
 # confidence is below it (0: never).
 NESTED_THRESHOLDS = (0.0, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7)
+# A part is warned of uncertain places below this percentile of the validation pairs' parts' mean
+# place confidence: the share of body parts like those trained on that a warning wrongly doubts.
+UNCERTAIN_PERCENTILE = 1.0
 
 
 def evaluate_pairs(parts_dir: Path, graph: Path, models: Path) -> dict:
     """The pairs' figures: the tell and nested thresholds chosen on the validation pairs
     (training people), then every test pair set's summary with them (see :func:`pair_rows`,
-    :func:`summary`)."""
+    :func:`summary`); and the mean place confidence below which a part is warned
+    (:data:`UNCERTAIN_PERCENTILE` of the validation pairs' parts)."""
     served = SpectralModels(models)
     model = CorrespondenceModel(graph, served.template_regions)
     validation = [row for name in VALIDATION_SETS for row in pair_rows(parts_dir, name, model, served)]
@@ -161,6 +180,9 @@ def evaluate_pairs(parts_dir: Path, graph: Path, models: Path) -> dict:
     return {
         "tell_below": chosen.tell_below,
         "nested_below": chosen.nested_below,
+        "uncertain_below": float(
+            np.percentile([c for row in validation for c in row["confidences"]], UNCERTAIN_PERCENTILE)
+        ),
         "validation": summary(validation, chosen)["all"],
         "sets": tests,
     }
@@ -202,6 +224,7 @@ def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: Sp
                 "told_truth": spectral_errors(oracle[None], truth)["mre"],
                 "told_nested": spectral_errors(nested.eigenvalues[None], truth)["mre"],
                 "inner_confidence": inner_confidence(certainty, 0, *spectra),
+                "confidences": certainty.confidence,
                 "elementwise_min": spectral_errors(elementwise_min(*(s[None] for s in spectra)), truth)["mre"],
                 "iou": float(plain.iou[0]),
                 "iou_mirror": float(mirrored.iou[0]),
@@ -257,7 +280,7 @@ def summary(rows: list[dict], chosen: Thresholds) -> dict[str, dict]:
     out = {}
     for kind, members in sorted(kinds.items()):
         numbers = [
-            {k: v for k, v in row.items() if k not in ("kind", "inner_confidence")}
+            {k: v for k, v in row.items() if k not in ("kind", "inner_confidence", "confidences")}
             | {"served": served_error(row, chosen), "nested": float(told_nested(row, chosen))}
             for row in members
         ]

@@ -12,7 +12,7 @@ from pathlib import Path
 import onnx
 
 from app.contract import CORRESPONDENCE_FILE
-from app.inference.correspondence import TELL_BELOW_KEY
+from app.inference.correspondence import TELL_BELOW_KEY, UNCERTAIN_BELOW_KEY
 from app.inference.manifest import write_manifest
 from app.inference.nesting import NESTED_BELOW_KEY
 from training.correspondence.card import BEGIN, END, render
@@ -38,7 +38,7 @@ def run_correspondence_pipeline(
     export_correspondence(model, checks[0], graph)
     write_manifest(models)
     pairs = evaluate_pairs(parts_dir, graph, models)
-    set_thresholds(graph, pairs["tell_below"], pairs["nested_below"])
+    set_thresholds(graph, pairs["tell_below"], pairs["nested_below"], pairs["uncertain_below"])
     write_manifest(models)
     metrics = {
         "parts": evaluate_correspondence(parts_dir, graph, models),
@@ -55,13 +55,18 @@ def run_correspondence_pipeline(
     return metrics
 
 
-def set_thresholds(graph: Path, tell_below: float, nested_below: float) -> None:
-    """Record in the graph's metadata below which measured overlap a union step is told it, and
-    below which place confidence a step whose spectra allow nesting is told nested (what the
-    service reads: :data:`app.inference.correspondence.TELL_BELOW_KEY`,
-    :data:`app.inference.nesting.NESTED_BELOW_KEY`)."""
+def set_thresholds(graph: Path, tell_below: float, nested_below: float, uncertain_below: float) -> None:
+    """Record in the graph's metadata below which measured overlap a union step is told it,
+    below which place confidence a step whose spectra allow nesting is told nested, and below
+    which a part's places are called uncertain (what the service reads:
+    :data:`app.inference.correspondence.TELL_BELOW_KEY`, :data:`app.inference.nesting.NESTED_BELOW_KEY`,
+    :data:`app.inference.correspondence.UNCERTAIN_BELOW_KEY`)."""
     model = onnx.load(str(graph))
     props = {entry.key: entry.value for entry in model.metadata_props}
-    props |= {TELL_BELOW_KEY: repr(tell_below), NESTED_BELOW_KEY: repr(nested_below)}
+    props |= {
+        TELL_BELOW_KEY: repr(tell_below),
+        NESTED_BELOW_KEY: repr(nested_below),
+        UNCERTAIN_BELOW_KEY: repr(uncertain_below),
+    }
     onnx.helper.set_model_props(model, props)
     onnx.save(model, str(graph))

@@ -134,7 +134,7 @@ async def correspondence(
             token=region_token(placed.cover),
         ),
         template_vertices=len(models.template.vertices),
-        warnings=solved.report.warnings,
+        warnings=solved.report.warnings + models.correspondence.doubts(placement),
     )
 
 
