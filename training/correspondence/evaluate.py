@@ -180,9 +180,7 @@ def evaluate_pairs(parts_dir: Path, graph: Path, models: Path) -> dict:
     return {
         "tell_below": chosen.tell_below,
         "nested_below": chosen.nested_below,
-        "uncertain_below": float(
-            np.percentile([c for row in validation for c in row["confidences"]], UNCERTAIN_PERCENTILE)
-        ),
+        "uncertain_below": uncertain_threshold(validation),
         "validation": summary(validation, chosen)["all"],
         "sets": tests,
     }
@@ -233,6 +231,12 @@ def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: Sp
             }
         )
     return rows
+
+
+def uncertain_threshold(rows: list[dict]) -> float:
+    """The mean place confidence below which a part is warned: :data:`UNCERTAIN_PERCENTILE` of
+    the confidences of the parts of ``rows`` (validation pairs)."""
+    return float(np.percentile([c for row in rows for c in row["confidences"]], UNCERTAIN_PERCENTILE))
 
 
 @dataclass(frozen=True)
