@@ -4,8 +4,6 @@ pairs' overlaps and unions beside the trivial answers; each goal met or not."""
 
 from collections.abc import Callable
 
-from training.correspondence.evaluate import UNCERTAIN_PERCENTILE
-
 BEGIN, END = "<!-- correspondence:begin -->", "<!-- correspondence:end -->"
 SET_NAMES = {
     "test_a": "A: seen people, unseen poses",
@@ -19,6 +17,7 @@ PAIR_NAMES = {"pairs_b": "B: region pairs, B in another pose", "pairs_c": "C: a 
 def render(metrics: dict, command: str) -> str:
     """The card's correspondence tables: parts beside the whole body and the spectral localizer,
     pairs' overlaps and unions beside the trivial answers, and the goals."""
+    pairs = metrics["pairs"]
     lines = [
         BEGIN,
         f"Produced by `{command}`.",
@@ -28,7 +27,7 @@ def render(metrics: dict, command: str) -> str:
         "share's difference, points, as served: summed from each template vertex's covered share, the localizer's "
         "from its region; true places: the same region rule fed each vertex's true place, the most it can reach; "
         "warned: answered with the warning that the part's places are uncertain, its mean place confidence below "
-        f"{metrics['pairs']['uncertain_below']:.2f}, the least certain {UNCERTAIN_PERCENTILE:g} % of the validation "
+        f"{pairs['uncertain_below']:.2f}, the least certain {pairs['uncertain_percentile']:g} % of the validation "
         "pairs' parts).",
         "",
         "| set | variant | parts | place error cm (centroid) | ≤ 5 / ≤ 10 cm | flips | IoU / mirror-allowed "
@@ -44,7 +43,6 @@ def render(metrics: dict, command: str) -> str:
                 f"{_pc(row['true_places_iou'])} | {_pc(row['whole_body_iou'])} | {_pc(row['localizer_iou_mirror'])} | "
                 f"{row['coverage_error']:.1f} ({row['localizer_coverage_error']:.1f}) | {_pc(row['warned'])} |"
             )
-    pairs = metrics["pairs"]
     lines += [
         "",
         "Pairs of parts of one person (union error: mean relative error of the 20 eigenvalues; told measured: "

@@ -181,6 +181,7 @@ def evaluate_pairs(parts_dir: Path, graph: Path, models: Path) -> dict:
         "tell_below": chosen.tell_below,
         "nested_below": chosen.nested_below,
         "uncertain_below": uncertain_threshold(validation),
+        "uncertain_percentile": UNCERTAIN_PERCENTILE,
         "validation": summary(validation, chosen)["all"],
         "sets": tests,
     }

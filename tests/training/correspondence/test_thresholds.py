@@ -5,7 +5,14 @@ import math
 
 import pytest
 
-from training.correspondence.evaluate import Thresholds, choose_thresholds, served_error, uncertain_threshold
+pytest.importorskip("torch")  # the evaluation reads the training's parts loader
+
+from training.correspondence.evaluate import (  # noqa: E402
+    Thresholds,
+    choose_thresholds,
+    served_error,
+    uncertain_threshold,
+)
 
 
 def _pair(measured: float, untold: float, told: float, nested: float, inner: float = math.inf) -> dict:
