@@ -61,7 +61,7 @@ TELL_BELOW_KEY = "tell_overlap_below"
 # is answered with a warning that its places are uncertain, chosen at export as the lowest
 # percentile of the validation pairs' parts (0: never). A part's mean confidence tracks its
 # region's IoU (correlation 0.9 on validation draws), and shapes that are no body part (a plane,
-# a torus, a capsule) are placed with a fifth of a body part's.
+# a torus, a capsule) are placed with a sixth to a third of a body part's.
 UNCERTAIN_BELOW_KEY = "uncertain_below_confidence"
 
 

@@ -236,7 +236,8 @@ def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: Sp
 
 def uncertain_threshold(rows: list[dict]) -> float:
     """The mean place confidence below which a part is warned: :data:`UNCERTAIN_PERCENTILE` of
-    the confidences of the parts of ``rows`` (validation pairs)."""
+    the confidences of the parts of ``rows`` (validation pairs; a session's view in several pairs
+    counts in each)."""
     return float(np.percentile([c for row in rows for c in row["confidences"]], UNCERTAIN_PERCENTILE))
 
 
