@@ -61,6 +61,7 @@ class UnionResponse(BaseModel):
     )
     warnings: list[str] = Field(
         default_factory=list,
-        description="What looks wrong though it was answered: an uploaded shape's implausible area, or "
-        "operands more than 10× apart in size (a unit slip?), each naming its operand.",
+        description="What looks wrong though it was answered: an uploaded shape's implausible area, "
+        "operands more than 10× apart in size (a unit slip?), or an upload whose places on the template are too "
+        "uncertain to trust its region, each naming its operand.",
     )

@@ -59,7 +59,10 @@ class CorrespondenceResponse(BaseModel):
     mean_confidence: float = Field(description="Area-weighted mean confidence over the part.")
     region: CorrespondenceRegion = Field(description="The template region the part covers.")
     template_vertices: int = Field(description="Vertices of the template body the indices refer to.")
-    warnings: list[str] = Field(description="What looks wrong though it was placed (units?).")
+    warnings: list[str] = Field(
+        description="What looks wrong though it was placed: an implausible area (units?), or places too "
+        "uncertain to trust its region and coverage (not a body part, or a view the model cannot place)."
+    )
 
 
 @router.post(
