@@ -201,23 +201,25 @@ def _placed(models: SpectralModels, operands: list[Operand]) -> list[PlacedPart]
     solved it (its time observed here), its places become a region here; spectra operands have
     nothing to place (their regions, if any, were carried)."""
     placed = []
-    for operand in operands:
-        if operand.part is None:
-            continue
+    for operand in _uploads(operands):
         if operand.places is not None:
             INFERENCE.labels("correspondence").observe(operand.places.graph_ms / 1e3)
         placed.append(models.correspondence.placed(operand.part, operand.places))
     return placed
 
 
+def _uploads(operands: list[Operand]) -> list[Operand]:
+    """The operands with a part to place (uploaded files), in order."""
+    return [operand for operand in operands if operand.part is not None]
+
+
 def _doubts(models: SpectralModels, operands: list[Operand], placed: list[PlacedPart]) -> list[str]:
     """A warning for each placed upload whose places are too uncertain to trust its region."""
     if not placed:
         return []
-    uploads = [operand for operand in operands if operand.part is not None]  # as _placed placed them
     return [
         f"{operand.source}: {warning}"
-        for operand, part in zip(uploads, placed, strict=True)
+        for operand, part in zip(_uploads(operands), placed, strict=True)
         for warning in models.correspondence.doubts(part.placement)
     ]
 

@@ -40,7 +40,7 @@ TRAINING_PRESETS = {
         TrainingPreset(
             name="tiny", steps=20, restarts=((10, 1e-3),), config=CorrespondenceConfig(width=16, blocks=2, patches=64)
         ),
-        TrainingPreset(name="standard", steps=24_000, restarts=((12_000, 5e-4), (12_000, 5e-4), (12_000, 5e-4))),
+        TrainingPreset(name="standard", steps=24_000, restarts=((12_000, 5e-4),) * 3),
     )
 }
 
