@@ -20,10 +20,11 @@ from app.api.problems import ProblemError
 from app.api.solver import SolverPool
 from app.core.config import Settings
 from app.core.errors import InputError
-from app.geometry.descriptors import PartInputs, Places
+from app.geometry.descriptors import Places
 from app.geometry.io import resolve_file_type
 from app.geometry.overlap import Footprint
 from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport
+from app.geometry.placing import Part
 from app.inference.models import InvalidOverlap
 from app.inference.spectra import InvalidSpectrum, checked_spectrum
 
@@ -174,7 +175,7 @@ class Operand:
     eigenvalues: list[float]
     report: SpectrumReport | None  # what the solve found, for files
     footprint: Footprint | None = None  # where an uploaded shape lies, when asked for
-    part: PartInputs | None = None  # what the correspondence network reads of an upload, when asked for
+    part: Part | None = None  # an upload as the correspondence graph places it, when asked for
     places: Places | None = None  # where the network placed it, when the solver worker did
 
 
@@ -212,6 +213,7 @@ def upload_options(
         max_vertices=settings.max_vertices,
         max_hole_edges=settings.max_hole_edges,
         cap_holes=cap_holes,
+        placed_vertices=settings.placed_vertices,
     )
 
 

@@ -8,6 +8,7 @@ from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from app.contract import MAX_HOLE_EDGES
+from app.geometry.placing import PLACED_VERTICES
 
 
 class Settings(BaseSettings):
@@ -24,6 +25,12 @@ class Settings(BaseSettings):
         ge=0,
         description="Boundary loops up to this many edges are pin-holes and get filled. Part of the spectrum "
         "definition the models are trained on: another value serves spectra, but not unions or regions.",
+    )
+    placed_vertices: int = Field(
+        PLACED_VERTICES,
+        ge=500,
+        description="A mesh with more vertices is placed on the template through its copy simplified to about this "
+        "many (each vertex taking the place of the copy's vertex it collapsed into): fewer is faster and less exact.",
     )
     models_dir: Path = Field(
         Path(__file__).resolve().parents[2] / "models",

@@ -11,11 +11,12 @@ from pydantic import Field
 
 from app.contract import MAX_HOLE_EDGES
 from app.core.errors import InputError
-from app.geometry.descriptors import PartInputs, Places, cloud_inputs, mesh_inputs
+from app.geometry.descriptors import Places
 from app.geometry.errors import InvalidGeometry
 from app.geometry.io import load_shape, unit_scale
 from app.geometry.laplacian import Operators, mesh_operators, point_cloud_operators
 from app.geometry.overlap import Footprint, footprint_of
+from app.geometry.placing import PLACED_VERTICES, Part, cloud_part, mesh_part
 from app.geometry.plausibility import area_warnings
 from app.geometry.shapes import Mesh, PointCloud
 from app.geometry.spectrum import DEFAULT_K, eigenpairs
@@ -36,6 +37,7 @@ class SpectrumOptions:
     max_vertices: int = 100_000
     max_hole_edges: int = MAX_HOLE_EDGES
     cap_holes: bool = False  # meshes: cap every boundary loop, not only pin-holes (a scan's blind spots)
+    placed_vertices: int = PLACED_VERTICES  # a mesh placed on the template through a copy of about this many
 
 
 @dataclass(frozen=True)
@@ -82,7 +84,7 @@ class Solved:
     functions: np.ndarray | None  # (vertices, k), M-orthonormal, 0 on Dirichlet boundary vertices
     sources: np.ndarray  # (vertices,): index in the uploaded vertex list, -1 for a pin-hole's centre
     footprint: Footprint | None = None  # with ``footprint``: where the shape lies, to measure overlaps by
-    part: PartInputs | None = None  # with ``descriptors``: what the correspondence network reads of it
+    part: Part | None = None  # with ``descriptors``: the part as the correspondence graph places it
     places: Places | None = None  # where the correspondence graph placed it, when the solver worker ran it
 
     def npz(self) -> bytes:
@@ -163,7 +165,8 @@ def _solve_mesh(
     )
     if not descriptors:
         return solved
-    return replace(solved, part=mesh_inputs(prepared.mesh.vertices, prepared.mesh.faces, operators=operators))
+    part = mesh_part(prepared.mesh.vertices, prepared.mesh.faces, operators, options.placed_vertices)
+    return replace(solved, part=part)
 
 
 def _solve_cloud(
@@ -195,7 +198,7 @@ def _solve_cloud(
     )
     if not descriptors:
         return solved
-    return replace(solved, part=cloud_inputs(prepared.cloud.points, prepared.boundary, operators=operators))
+    return replace(solved, part=cloud_part(prepared.cloud.points, prepared.boundary, operators))
 
 
 def _solve(

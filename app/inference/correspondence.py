@@ -20,6 +20,7 @@ from scipy.spatial import cKDTree
 from app.contract import CORRESPONDENCE_INPUTS
 from app.geometry.descriptors import FEATURES, PartInputs, Places
 from app.geometry.laplacian import Operators
+from app.geometry.placing import Part
 from app.inference.cover import Cover
 from app.inference.nesting import NESTED_BELOW_KEY
 from app.inference.template import RegionBoundaries, Template
@@ -191,11 +192,12 @@ class PlacingGraph:
 _WORKER_GRAPHS: dict[str, PlacingGraph] = {}
 
 
-def places_in_worker(path: str, inputs: PartInputs) -> Places:
-    """The graph at ``path`` run on one part, its session made once per worker process."""
+def places_in_worker(path: str, part: Part) -> Places:
+    """The graph at ``path`` run on one part (its places on the part's own vertices), its session
+    made once per worker process."""
     if path not in _WORKER_GRAPHS:
         _WORKER_GRAPHS[path] = PlacingGraph(Path(path))
-    return _WORKER_GRAPHS[path].run(inputs)
+    return part.expand(_WORKER_GRAPHS[path].run(part.inputs))
 
 
 class CorrespondenceModel:
@@ -209,16 +211,16 @@ class CorrespondenceModel:
         self.nested_below = self.graph.nested_below
         self.uncertain_below = self.graph.uncertain_below
 
-    def place(self, inputs: PartInputs) -> Placement:
-        """Each vertex of a part (its inputs from app.geometry.descriptors) on the template."""
-        return self.placement(inputs, self.graph.run(inputs))
+    def place(self, part: Part) -> Placement:
+        """Each vertex of a part (app.geometry.placing) on the template."""
+        return self.placement(part, part.expand(self.graph.run(part.inputs)))
 
-    def placement(self, inputs: PartInputs, places: Places) -> Placement:
-        """A part's places as the graph gave them, with each one's nearest template vertex."""
+    def placement(self, part: Part, places: Places) -> Placement:
+        """A part's places on its own vertices, with each one's nearest template vertex."""
         position = places.position.astype(np.float64)
         nearest = self.regions.nearest(position)
         confidence = places.confidence.astype(np.float64)
-        return Placement(position, confidence, nearest, inputs.mass.astype(np.float64), inputs.boundary)
+        return Placement(position, confidence, nearest, part.mass.astype(np.float64), part.boundary)
 
     def doubts(self, placement: Placement) -> list[str]:
         """A warning where the part's places are too uncertain to trust its region (see
@@ -236,7 +238,7 @@ class CorrespondenceModel:
         """What the placed part covers on the template."""
         return self.regions.cover(placement.vertex, placement.area, placement.boundary)
 
-    def placed(self, inputs: PartInputs, places: Places | None = None) -> PlacedPart:
+    def placed(self, part: Part, places: Places | None = None) -> PlacedPart:
         """The part placed (by ``places`` a worker computed, else here) and what it covers."""
-        placement = self.place(inputs) if places is None else self.placement(inputs, places)
+        placement = self.place(part) if places is None else self.placement(part, places)
         return PlacedPart(placement, self.cover(placement))

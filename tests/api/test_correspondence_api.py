@@ -60,6 +60,21 @@ def test_a_template_part_is_placed_on_itself(client, samples, template):
     assert coverage["head"] < 0.3 and coverage["hips"] > 0.7 and coverage["torso"] > 0.7
 
 
+def test_a_service_with_a_smaller_budget_answers_every_vertex_through_a_coarser_copy(tmp_path, samples):
+    """``placed_vertices`` set to 2 000: the 9 k-vertex part is read through a copy of ~2 000
+    vertices (so its vertices share ~2 000 places), and still every uploaded vertex gets its
+    place, near itself (the template part's vertices are their own places)."""
+    name = "no_head_neck.ply"
+    settings = settings_for(tmp_path / "shapes.sqlite").model_copy(update={"placed_vertices": 2_000})
+    with TestClient(create_app(settings)) as coarse:
+        body = _correspond(coarse, name, samples[name]).json()
+    mesh = trimesh.load(io.BytesIO(samples[name]), file_type="ply", process=False)
+    truth = np.asarray(mesh.vertices)[np.array(body["vertex_indices"])]
+    assert body["vertices"] == len(body["position"]) == len(mesh.vertices)
+    assert len(np.unique(np.array(body["position"]), axis=0)) <= 2_100
+    assert np.median(np.linalg.norm(np.array(body["position"]) - truth, axis=1)) < 0.10
+
+
 def test_frame_units_and_winding_do_not_move_the_places(client, samples):
     """The part turned, moved, written in centimetres with its faces turned inward is placed
     where it was: the network reads only intrinsic, outward-oriented inputs."""

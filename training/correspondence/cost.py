@@ -2,10 +2,11 @@
 
 The part is the README's larger sample (the template less its left forearm and hand, ~10 k
 vertices), computed as a solver worker computes it: one BLAS thread and the graph on one thread
-(the service's pool runs a worker per core, so a 2-core machine places two parts at once). The
-stages are disjoint and take turns within every repeat: the Laplacian, the rest of the graph's
-inputs (the 64-function eigenbasis, heat signature, curvature, winding and stencil), the graph
-with each place's nearest template vertex, and the region with its shares. Its own k = 20
+(the service's pool runs a worker per core, so a 2-core machine places two parts at once), and
+through its copy of about 6 000 vertices as the service places it (app.geometry.placing). The
+stages are disjoint and take turns within every repeat: the part's Laplacian, the copy with the
+graph's inputs of it (the 64-function eigenbasis, heat signature, curvature, winding and
+stencil), the graph with each place's nearest template vertex, and the region with its shares. Its own k = 20
 spectrum, which every upload costs anyway, is not counted. ``benchmarks/bench_correspondence.py``
 times the same stages beside LaPy-CHOLMOD's eigenbasis.
 """
@@ -14,8 +15,8 @@ from pathlib import Path
 
 from threadpoolctl import threadpool_limits
 
-from app.geometry.descriptors import mesh_inputs
 from app.geometry.laplacian import mesh_operators
+from app.geometry.placing import mesh_part
 from app.inference.correspondence import CorrespondenceModel
 from app.inference.models import SpectralModels
 from app.samples import PARTS, template_part_mesh
@@ -34,14 +35,14 @@ def part_cost(graph: Path, models: Path, repeats: int = COST_REPEATS) -> dict:
     part = template_part_mesh(served.template, PARTS[COST_PART])
     vertices, faces = part.vertices, part.faces
     operators = mesh_operators(vertices, faces)
-    inputs = mesh_inputs(vertices, faces, operators=operators)
-    placement = model.place(inputs)
+    placing = mesh_part(vertices, faces, operators)
+    placement = model.place(placing)
     with threadpool_limits(limits=COST_THREADS):
         ms = interleaved_ms(
             {
                 "laplacian": lambda: mesh_operators(vertices, faces),
-                "inputs": lambda: mesh_inputs(vertices, faces, operators=operators),
-                "graph": lambda: model.place(inputs),
+                "inputs": lambda: mesh_part(vertices, faces, operators),
+                "graph": lambda: model.place(placing),
                 "region": lambda: model.cover(placement),
             },
             repeats,
@@ -49,7 +50,8 @@ def part_cost(graph: Path, models: Path, repeats: int = COST_REPEATS) -> dict:
     stages = {f"{stage}_ms": round(value, 1) for stage, value in ms.items()}
     return {
         "part": COST_PART,
-        "vertices": inputs.vertices,
+        "vertices": len(vertices),
+        "placed_vertices": placing.inputs.vertices,
         "threads": COST_THREADS,
         **stages,
         "total_ms": round(sum(ms.values()), 1),

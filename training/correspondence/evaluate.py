@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from app.contract import CORRESPONDENCE_INPUTS
-from app.geometry.descriptors import PartInputs
-from app.geometry.tangent import GradientStencil
+from app.geometry.descriptors import BOUNDARY_COLUMN
+from app.geometry.laplacian import mesh_operators, point_cloud_operators
+from app.geometry.placing import Part, cloud_part, mesh_part
 from app.inference.correspondence import CorrespondenceModel, Placement
 from app.inference.cover import Cover
 from app.inference.models import SpectralModels
@@ -131,7 +131,7 @@ def evaluate_correspondence(parts_dir: Path, graph: Path, models: Path) -> dict:
         rows: dict[str, list[PartScore]] = {variant: [] for variant in VARIANTS}
         for part in parts:
             truth = np.unpackbits(part["mask"], count=n).astype(bool)
-            placement = model.place(_inputs(part))
+            placement = model.place(served_part(part))
             cover = model.cover(placement)
             body = np.asarray(shapes[int(part["shape"])], dtype=np.float64)
             spectrum = task_spectrum(body, template.faces, truth, str(part["variant"]), served.k)
@@ -196,7 +196,7 @@ def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: Sp
     rows = []
     for pair in load_pairs(parts_dir, name):
         a, b, union = (np.unpackbits(pair[f"mask_{s}"], count=n).astype(bool) for s in ("a", "b", "union"))
-        placed = [model.placed(_inputs(pair, side)) for side in ("a_", "b_")]
+        placed = [model.placed(served_part(pair, side)) for side in ("a_", "b_")]
         measured, measured_edge = regions.fold([p.region for p in placed])
         true, true_edge = regions.fold([a, b])
         spectra = [pair["spectrum_a"], pair["spectrum_b"]]
@@ -298,10 +298,14 @@ def _means(rows: list[dict]) -> dict[str, float]:
     return {key: float(np.mean([row[key] for row in rows])) for key in rows[0]}
 
 
-def _inputs(part: dict[str, np.ndarray], prefix: str = "") -> PartInputs:
-    """Saved inputs (by contract name, under ``prefix``) as the service's PartInputs."""
-    arrays = [part[prefix + name] for name in CORRESPONDENCE_INPUTS]
-    return PartInputs(*arrays[:4], GradientStencil(*arrays[4:]))
+def served_part(saved: dict[str, np.ndarray], prefix: str = "") -> Part:
+    """A saved part (its arrays under ``prefix``) as the service places it: from its geometry, so
+    that a mesh above the service's vertex budget is placed through its copy."""
+    points, faces = saved[prefix + "points"], saved[prefix + "faces"]
+    if faces.size == 0:  # a point cloud
+        boundary = saved[prefix + "features"][:, BOUNDARY_COLUMN] > 0
+        return cloud_part(points, boundary, point_cloud_operators(points))
+    return mesh_part(points, faces, mesh_operators(points, faces))
 
 
 def _mean(scores: list[PartScore]) -> dict[str, float]:

@@ -20,7 +20,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from app.geometry.errors import GeometryError
-from training.correspondence.parts import PartsPreset, part_of
+from training.correspondence.parts import PartsPreset, part_geometry, part_of
 from training.data.camera import scan_session
 from training.data.overlaps import CAMERA_CLOSE_UP, CAMERA_FAR, CAMERA_NEXT, CAMERA_POSE, CAMERA_RESCAN, ORBIT
 from training.data.pairs import OVERLAP, PARTIAL_UNION, sample_pair
@@ -131,7 +131,7 @@ def _row(sampler, shapes, kind: str, a: np.ndarray, b: np.ndarray, shape_a: int,
     row = {"kind": kind, "spectrum_a": spectra[0], "spectrum_b": spectra[1], "union": spectra[2]}
     row |= {"mask_a": np.packbits(a), "mask_b": np.packbits(b), "mask_union": np.packbits(union)}
     for side, part in zip("ab", inputs, strict=True):
-        row |= {f"{side}_{key}": value for key, value in part.feeds().items()}
+        row |= {f"{side}_{key}": value for key, value in (part.feeds() | part_geometry(part)).items()}
     return row
 
 

@@ -173,6 +173,9 @@ def draw_part(template_dir: str, shapes_path: str, out: str, seed: int, plan: Pl
             break
         except GeometryError:
             continue
+    # A test part keeps its geometry too: the evaluation places it as the service does, which
+    # may read a simplified copy of it (app.geometry.placing); training reads only its inputs.
+    geometry = {} if plan.set == "train" else part_geometry(inputs)
     np.savez(
         part_path(Path(out), plan),
         target=target,
@@ -181,7 +184,14 @@ def draw_part(template_dir: str, shapes_path: str, out: str, seed: int, plan: Pl
         cut=plan.cut,
         variant=plan.variant,
         **inputs.feeds(),
+        **geometry,
     )
+
+
+def part_geometry(inputs: PartInputs) -> dict[str, np.ndarray]:
+    """A delivered part's points and a mesh's faces (none for a point cloud), as saved."""
+    faces = np.empty((0, 3), np.int64) if inputs.faces is None else inputs.faces
+    return {"points": inputs.points, "faces": faces}
 
 
 def _cut(cut: str, sampler, body: np.ndarray, rng: np.random.Generator) -> np.ndarray:
