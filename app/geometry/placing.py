@@ -82,18 +82,29 @@ def _collapsed(vertices: np.ndarray, faces: np.ndarray, most: int) -> tuple[Mesh
     """The mesh's quadric edge collapse to about ``most`` vertices, through the service's checks,
     and for each vertex the copy's vertex it collapsed into (or, where the checks dropped that
     one, the copy's nearest). Raises :class:`GeometryError` where the copy fails the checks."""
-    _, _, collapses = fast_simplification.simplify(
+    points, triangles, collapses = fast_simplification.simplify(
         vertices, faces, target_reduction=1 - most / len(vertices), return_collapses=True
     )
-    points, triangles, collapsed_into = fast_simplification.replay_simplification(vertices, faces, collapses)
     prepared = prepare_mesh(
         Mesh(np.asarray(points, np.float64), np.asarray(triangles, np.int64)), k=1, max_hole_edges=0
     )
     kept = prepared.sources >= 0
     renumber = np.full(len(points), -1)
     renumber[prepared.sources[kept]] = np.flatnonzero(kept)
-    source = renumber[collapsed_into]
+    source = renumber[collapsed_into(collapses, len(vertices))]
     lost = source < 0
     if lost.any():
         source[lost] = cKDTree(prepared.mesh.vertices).query(vertices[lost])[1]
     return prepared.mesh, source
+
+
+def collapsed_into(collapses: np.ndarray, count: int) -> np.ndarray:
+    """For each of ``count`` vertices, the copy vertex it ended in: ``collapses`` (c, 2) lists, in
+    order, a kept vertex and the one collapsed into it; each vertex's chain is followed to its end
+    (by pointer doubling), and the survivors are numbered in their order, as the copy numbers them
+    (what fast-simplification's ``replay_simplification`` answers, without replaying the mesh)."""
+    into = np.arange(count)
+    into[collapses[:, 1]] = collapses[:, 0]
+    while not np.array_equal(further := into[into], into):
+        into = further
+    return np.searchsorted(np.unique(into), into)
