@@ -7,7 +7,7 @@ millimetres. The copy is the mesh's quadric edge collapse (fast-simplification: 
 that makes the training's re-meshed parts), each vertex taking the place of the copy's vertex
 it collapsed into. On the validation draws of the training people, meshes placed through a copy
 of 6 000 vertices kept their region within 0.1 point of their own and a 10 k-vertex part cost
-~40 % less; point clouds' copies lost up to 2 points, so a cloud is placed itself
+a third less; point clouds' copies lost up to 2 points, so a cloud is placed itself
 (``docs/decisions/031-meshes-placed-through-a-copy-of-6000-vertices.md``). The copy is an
 optimization, never a reason to refuse: where it fails the service's own checks, the part is
 placed itself. Everything else a client gets (the part's vertices, area, boundary, region) is
@@ -59,7 +59,8 @@ def mesh_part(vertices: np.ndarray, faces: np.ndarray, operators: Operators, mos
     """A prepared mesh (metres, its Laplacian ``operators``) placed through a copy of about
     ``most`` vertices where it has more."""
     if len(vertices) > most:
-        # Collapsed as wound outward: the collapse depends on the winding, not on the frame.
+        # Collapsed as wound outward and in metres: the collapse depends on winding and scale,
+        # not on the frame.
         own = outward_faces(vertices, faces, operators.stiffness)
         try:
             copy, source = _collapsed(vertices, own, most)
@@ -82,29 +83,18 @@ def _collapsed(vertices: np.ndarray, faces: np.ndarray, most: int) -> tuple[Mesh
     """The mesh's quadric edge collapse to about ``most`` vertices, through the service's checks,
     and for each vertex the copy's vertex it collapsed into (or, where the checks dropped that
     one, the copy's nearest). Raises :class:`GeometryError` where the copy fails the checks."""
-    points, triangles, collapses = fast_simplification.simplify(
+    _, _, collapses = fast_simplification.simplify(
         vertices, faces, target_reduction=1 - most / len(vertices), return_collapses=True
     )
+    points, triangles, collapsed_into = fast_simplification.replay_simplification(vertices, faces, collapses)
     prepared = prepare_mesh(
         Mesh(np.asarray(points, np.float64), np.asarray(triangles, np.int64)), k=1, max_hole_edges=0
     )
     kept = prepared.sources >= 0
     renumber = np.full(len(points), -1)
     renumber[prepared.sources[kept]] = np.flatnonzero(kept)
-    source = renumber[collapsed_into(collapses, len(vertices))]
+    source = renumber[collapsed_into]
     lost = source < 0
     if lost.any():
         source[lost] = cKDTree(prepared.mesh.vertices).query(vertices[lost])[1]
     return prepared.mesh, source
-
-
-def collapsed_into(collapses: np.ndarray, count: int) -> np.ndarray:
-    """For each of ``count`` vertices, the copy vertex it ended in: ``collapses`` (c, 2) lists, in
-    order, a kept vertex and the one collapsed into it; each vertex's chain is followed to its end
-    (by pointer doubling), and the survivors are numbered in their order, as the copy numbers them
-    (what fast-simplification's ``replay_simplification`` answers, without replaying the mesh)."""
-    into = np.arange(count)
-    into[collapses[:, 1]] = collapses[:, 0]
-    while not np.array_equal(further := into[into], into):
-        into = further
-    return np.searchsorted(np.unique(into), into)

@@ -2,7 +2,6 @@
 place of a nearby copy vertex, the copy does not depend on the frame or the winding, and a copy
 the checks refuse leaves the part placed itself."""
 
-import fast_simplification
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -11,7 +10,7 @@ import app.geometry.placing as placing
 from app.geometry.descriptors import Places, mesh_inputs
 from app.geometry.errors import InvalidGeometry
 from app.geometry.laplacian import mesh_operators
-from app.geometry.placing import collapsed_into, mesh_part
+from app.geometry.placing import mesh_part
 from app.geometry.topology import boundary_vertex_mask
 from tests.conftest import bumpy_patch, sphere
 
@@ -92,12 +91,3 @@ def test_the_service_refuses_a_budget_below_its_floor(most, monkeypatch):
     monkeypatch.setenv("SPECTRAL_UNIONS_PLACED_VERTICES", str(most))
     with pytest.raises(ValidationError):
         Settings()
-
-
-def test_each_vertex_s_copy_vertex_is_the_one_the_library_s_replay_gives():
-    mesh = bumpy_patch(n=2500)
-    _, _, collapses = fast_simplification.simplify(
-        mesh.vertices, mesh.faces, target_reduction=0.6, return_collapses=True
-    )
-    _, _, expected = fast_simplification.replay_simplification(mesh.vertices, mesh.faces, collapses)
-    np.testing.assert_array_equal(collapsed_into(collapses, len(mesh.vertices)), expected)
