@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from app.geometry.descriptors import PartInputs, Places, cloud_inputs, mesh_inputs
-from app.geometry.errors import GeometryError
+from app.geometry.errors import GeometryError, InvalidGeometry
 from app.geometry.laplacian import Operators
 from app.geometry.shapes import Mesh
 from app.geometry.tangent import outward_faces
@@ -82,11 +82,14 @@ def cloud_part(points: np.ndarray, boundary: np.ndarray | None, operators: Opera
 def _collapsed(vertices: np.ndarray, faces: np.ndarray, most: int) -> tuple[Mesh, np.ndarray]:
     """The mesh's quadric edge collapse to about ``most`` vertices, through the service's checks,
     and for each vertex the copy's vertex it collapsed into (or, where the checks dropped that
-    one, the copy's nearest). Raises :class:`GeometryError` where the copy fails the checks."""
+    one, the copy's nearest). Raises :class:`GeometryError` where the copy fails the checks or
+    the collapse's record does not match it."""
     _, _, collapses = fast_simplification.simplify(
         vertices, faces, target_reduction=1 - most / len(vertices), return_collapses=True
     )
     points, triangles, collapsed_into = fast_simplification.replay_simplification(vertices, faces, collapses)
+    if collapsed_into.shape != (len(vertices),) or not np.all((collapsed_into >= 0) & (collapsed_into < len(points))):
+        raise InvalidGeometry("the collapse's record does not number its copy's vertices")
     prepared = prepare_mesh(
         Mesh(np.asarray(points, np.float64), np.asarray(triangles, np.int64)), k=1, max_hole_edges=0
     )

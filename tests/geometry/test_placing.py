@@ -72,6 +72,19 @@ def test_the_copy_does_not_depend_on_the_frame_or_the_winding():
     np.testing.assert_allclose(other.inputs.eigenvalues, reference.inputs.eigenvalues, rtol=1e-3, atol=1e-3)
 
 
+def test_a_collapse_record_that_does_not_number_its_copy_leaves_the_part_placed_itself(monkeypatch):
+    replay = placing.fast_simplification.replay_simplification
+
+    def off_by_one(vertices, faces, collapses):
+        points, triangles, into = replay(vertices, faces, collapses)
+        return points, triangles, into + 1  # the last vertex's copy vertex is past the copy's end
+
+    monkeypatch.setattr(placing.fast_simplification, "replay_simplification", off_by_one)
+    mesh = bumpy_patch(n=2500)
+    part = _part(mesh, most=800)
+    assert part.source is None and part.inputs.vertices == len(mesh.vertices)
+
+
 def test_a_copy_the_checks_refuse_leaves_the_part_placed_itself(monkeypatch):
     def refused(*_):
         raise InvalidGeometry("a collapse that left an edge with three faces")
