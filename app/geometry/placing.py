@@ -37,7 +37,7 @@ class Part:
     its copy) and what the places are answered on (the part's own vertices)."""
 
     inputs: PartInputs
-    points: np.ndarray | None  # (n, 3) the part's vertices, metres (None: inputs saved without them)
+    points: np.ndarray | None  # (n, 3) the part's vertices, metres (as its inputs carry them)
     faces: np.ndarray | None  # (m, 3) its outward-wound faces; None for a point cloud
     mass: np.ndarray  # (n,) its lumped area at each vertex, m²
     boundary: np.ndarray  # (n,) bool: its boundary vertices

@@ -6,8 +6,8 @@ vertices), computed as a solver worker computes it: one BLAS thread and the grap
 through its copy of about 6 000 vertices as the service places it (app.geometry.placing). The
 stages are disjoint and take turns within every repeat: the part's Laplacian, the copy with the
 graph's inputs of it (the 64-function eigenbasis, heat signature, curvature, winding and
-stencil), the graph with each place's nearest template vertex, and the region with its shares. Its own k = 20
-spectrum, which every upload costs anyway, is not counted. ``benchmarks/bench_correspondence.py``
+stencil), the graph with each place's nearest template vertex, and the region with its shares.
+Its own k = 20 spectrum, which every upload costs anyway, is not counted. ``benchmarks/bench_correspondence.py``
 times the same stages beside LaPy-CHOLMOD's eigenbasis.
 """
 

@@ -1,8 +1,10 @@
 """Scoring the exported correspondence graph on held-out parts, beside the trivial answers.
 
-Every figure is of the served path: the ONNX graph through :class:`CorrespondenceModel` and its
-regions. Per test set (A: training identities in held-out poses; B: unseen identities, random
-regions; C: unseen identities, camera views) and per variant (mesh, re-meshed, point cloud):
+Every figure is of the served path: each part placed from its saved geometry as the service
+places an upload (:mod:`app.geometry.placing`: a mesh above the vertex budget through its
+collapsed copy), the ONNX graph through :class:`CorrespondenceModel` and its regions. Per test
+set (A: training identities in held-out poses; B: unseen identities, random regions; C: unseen
+identities, camera views) and per variant (mesh, re-meshed, point cloud):
 
 - place error on the template (cm, area-weighted over each part's vertices, then averaged over
   parts), the share of vertices within 5 and 10 cm, beside the template's area centroid for
