@@ -7,7 +7,7 @@ millimetres. The copy is the mesh's quadric edge collapse (fast-simplification: 
 that makes the training's re-meshed parts), each vertex taking the place of the copy's vertex
 it collapsed into. On the validation draws of the training people, meshes placed through a copy
 of 6 000 vertices kept their region within 0.1 point of their own and a 10 k-vertex part cost
-a third less; point clouds' copies lost up to 2 points, so a cloud is placed itself
+a third less; point clouds' copies lost up to 1.7 points, so a cloud is placed itself
 (``docs/decisions/031-meshes-placed-through-a-copy-of-6000-vertices.md``). The copy is an
 optimization, never a reason to refuse: where it fails the service's own checks, the part is
 placed itself. Everything else a client gets (the part's vertices, area, boundary, region) is
