@@ -71,7 +71,8 @@ def test_a_service_with_a_smaller_budget_answers_every_vertex_through_a_coarser_
     mesh = trimesh.load(io.BytesIO(samples[name]), file_type="ply", process=False)
     truth = np.asarray(mesh.vertices)[np.array(body["vertex_indices"])]
     assert body["vertices"] == len(body["position"]) == len(mesh.vertices)
-    assert len(np.unique(np.array(body["position"]), axis=0)) <= 2_100
+    assert body["placed_on"] <= 2_100
+    assert len(np.unique(np.array(body["position"]), axis=0)) <= body["placed_on"]
     assert np.median(np.linalg.norm(np.array(body["position"]) - truth, axis=1)) < 0.10
 
 
@@ -97,6 +98,7 @@ def test_npz_and_ply_carry_what_the_json_says(client, samples):
     np.testing.assert_allclose(arrays["position"], body["position"], atol=1e-4)
     np.testing.assert_array_equal(arrays["template_vertex"], body["template_vertex"])
     np.testing.assert_array_equal(arrays["region"], body["region"]["vertices"])
+    assert int(arrays["placed_on"]) == body["placed_on"] < body["vertices"]  # 9 045 vertices, read through a copy
     ply = _correspond(client, name, samples[name], format="ply")
     assert ply.headers["content-type"] == "application/ply"
     coloured = trimesh.load(io.BytesIO(ply.content), file_type="ply", process=False)
@@ -165,6 +167,7 @@ def test_a_shape_that_is_no_body_part_is_placed_with_a_warning(client, name):
     below = client.app.state.resources.require_models().correspondence.uncertain_below
     assert answer["mean_confidence"] < below
     assert any("uncertain" in warning for warning in answer["warnings"])
+    assert answer["placed_on"] == answer["vertices"]  # small enough to be read itself
 
 
 def test_parts_of_the_template_body_are_placed_without_a_warning(client, samples):

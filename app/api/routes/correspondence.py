@@ -48,6 +48,11 @@ class CorrespondenceResponse(BaseModel):
         "as a spectra operand with region.token in regions."
     )
     vertices: int = Field(description="Vertices (or points) placed: the upload's, after the service's cleaning.")
+    placed_on: int = Field(
+        description="Vertices the correspondence graph read: the part's own, or, for a mesh above the service's "
+        "placed_vertices, its quadric-collapsed copy's; each vertex then has the place and confidence of the copy "
+        "vertex it collapsed into, so neighbouring vertices may share one."
+    )
     vertex_indices: list[int] = Field(
         description="Each placed vertex's index in the uploaded file (-1 for the centre of a filled pin-hole)."
     )
@@ -125,6 +130,7 @@ async def correspondence(
         model_version=models.version,
         eigenvalues=solved.report.eigenvalues,
         vertices=len(placement.vertex),
+        placed_on=solved.part.inputs.vertices,
         vertex_indices=solved.sources.tolist(),
         template_vertex=placement.vertex.tolist(),
         position=np.round(placement.position, POSITION_DECIMALS).tolist(),
@@ -149,6 +155,7 @@ def _npz(solved: Solved, placement: Placement, region: np.ndarray) -> bytes:
         confidence=placement.confidence,
         template_vertex=placement.vertex,
         vertex_indices=solved.sources,
+        placed_on=np.array(solved.part.inputs.vertices),
         region=np.flatnonzero(region),
     )
     return buffer.getvalue()
