@@ -18,7 +18,7 @@ from scipy.sparse.linalg import splu
 from scipy.spatial import cKDTree
 
 from app.contract import CORRESPONDENCE_INPUTS
-from app.geometry.descriptors import FEATURES, PartInputs, Places
+from app.geometry.descriptors import FEATURES, Places
 from app.geometry.laplacian import Operators
 from app.geometry.placing import Part
 from app.inference.cover import Cover
@@ -181,12 +181,14 @@ class PlacingGraph:
         self.nested_below = float(metadata.get(NESTED_BELOW_KEY, 0.0))
         self.uncertain_below = float(metadata.get(UNCERTAIN_BELOW_KEY, 0.0))
 
-    def run(self, inputs: PartInputs) -> Places:
+    def run(self, part: Part) -> Places:
+        """The places of the part's own vertices: the graph run on what it reads of the part (the
+        part, or its collapsed copy), its places handed to the part's vertices."""
         started = time.perf_counter()
-        position, confidence = self.session.run(None, inputs.feeds())
+        position, confidence = self.session.run(None, part.inputs.feeds())
         if not (np.isfinite(position).all() and np.isfinite(confidence).all()):
             raise ValueError("the correspondence graph returned non-finite places")
-        return Places(position, confidence, (time.perf_counter() - started) * 1e3)
+        return part.expand(Places(position, confidence, (time.perf_counter() - started) * 1e3))
 
 
 _WORKER_GRAPHS: dict[str, PlacingGraph] = {}
@@ -197,7 +199,7 @@ def places_in_worker(path: str, part: Part) -> Places:
     made once per worker process."""
     if path not in _WORKER_GRAPHS:
         _WORKER_GRAPHS[path] = PlacingGraph(Path(path))
-    return part.expand(_WORKER_GRAPHS[path].run(part.inputs))
+    return _WORKER_GRAPHS[path].run(part)
 
 
 class CorrespondenceModel:
@@ -213,7 +215,7 @@ class CorrespondenceModel:
 
     def place(self, part: Part) -> Placement:
         """Each vertex of a part (app.geometry.placing) on the template."""
-        return self.placement(part, part.expand(self.graph.run(part.inputs)))
+        return self.placement(part, self.graph.run(part))
 
     def placement(self, part: Part, places: Places) -> Placement:
         """A part's places on its own vertices, with each one's nearest template vertex."""
