@@ -86,24 +86,25 @@ def train(parts_dir: Path, run: Path, preset: TrainingPreset, seed: int = 0, log
     inputs_of = [torch_inputs(part) for part in parts]
     stencils = [stencil_matrices(inputs[4], inputs[5]) for inputs in inputs_of]
     data = _TrainingData(parts, inputs_of, stencils, torch.as_tensor(template.vertices, dtype=torch.float32), patch)
+    run.parent.mkdir(parents=True, exist_ok=True)
     for steps, learning_rate in cycles[done:]:
         started = time.perf_counter()
         losses += _cycle(model, data, steps, learning_rate, rng, log)
         seconds += time.perf_counter() - started
-    checkpoint = {
-        "model": model.state_dict(),
-        "config": preset.config.as_dict(),
-        "centres": centres,
-        "patch": patch,
-        "preset": preset.name,
-        "training": asdict(preset) | {"config": preset.config.as_dict()},
-        "seed": seed,
-        "step": len(losses),
-        "losses": np.asarray(losses),
-        "seconds": seconds,
-    }
-    run.parent.mkdir(parents=True, exist_ok=True)
-    torch.save(checkpoint, run)
+        # Saved at every cycle's end, so that a run stopped in a later cycle continues from here.
+        checkpoint = {
+            "model": model.state_dict(),
+            "config": preset.config.as_dict(),
+            "centres": centres,
+            "patch": patch,
+            "preset": preset.name,
+            "training": asdict(preset) | {"config": preset.config.as_dict()},
+            "seed": seed,
+            "step": len(losses),
+            "losses": np.asarray(losses),
+            "seconds": seconds,
+        }
+        torch.save(checkpoint, run)
     return checkpoint
 
 

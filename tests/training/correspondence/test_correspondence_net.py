@@ -115,3 +115,26 @@ def test_a_run_continued_after_its_first_cycle_ends_where_one_run_would(tmp_path
     np.testing.assert_array_equal(continued["losses"], scratch["losses"])
     for name, weights in scratch["model"].items():
         torch.testing.assert_close(continued["model"][name], weights, rtol=0, atol=0)
+
+
+def test_a_run_stopped_in_a_later_cycle_keeps_the_cycles_it_finished(tmp_path):
+    """Each cycle's end is saved: a run stopped inside its second cycle leaves the first cycle's
+    checkpoint, and the same command then ends where one uninterrupted run does."""
+    parts_dir = _parts_dir(tmp_path)
+    preset = TrainingPreset(name="cycles", steps=6, learning_rate=5e-3, restarts=((4, 1e-3),), config=CONFIG)
+
+    class Stopped(Exception):
+        pass
+
+    def stop_in_second_cycle(line: str) -> None:
+        if "(from 0.001)" in line:
+            raise Stopped
+
+    with pytest.raises(Stopped):
+        train(parts_dir, tmp_path / "stopped.pt", preset, log=stop_in_second_cycle)
+    assert torch.load(tmp_path / "stopped.pt", weights_only=False)["step"] == 6
+    continued = train(parts_dir, tmp_path / "stopped.pt", preset, log=lambda _: None)
+    scratch = train(parts_dir, tmp_path / "scratch.pt", preset, log=lambda _: None)
+    np.testing.assert_array_equal(continued["losses"], scratch["losses"])
+    for name, weights in scratch["model"].items():
+        torch.testing.assert_close(continued["model"][name], weights, rtol=0, atol=0)
