@@ -26,7 +26,7 @@ import httpx
 
 from app.api.problems import PROBLEM_MEDIA_TYPE, Problem
 from app.api.responses import UnionResponse
-from app.api.routes.correspondence import CorrespondenceResponse
+from app.api.routes.correspondence import CorrespondenceResponse, PlacesKind
 from app.api.routes.localize import LocalizeResponse
 from app.api.routes.models import ModelsResponse
 from app.api.routes.overlap import OverlapResponse
@@ -118,10 +118,13 @@ class Client:
         scale: float | None = None,
         closed: bool = False,
         boundary: Sequence[int] | None = None,
+        places: PlacesKind = "network",
     ) -> CorrespondenceResponse:
         """Each vertex of one scan placed on the template's rest pose, with its confidence, and the
-        template region it covers (``region.token`` to send back in ``regions`` beside its spectrum)."""
-        params = _params(units=units, scale=scale, closed=closed)
+        template region it covers (``region.token`` to send back in ``regions`` beside its spectrum);
+        ``places="relaxed"``: the places relaxed toward the scan's own edge lengths (closer to the
+        truth, where a client reads the places themselves)."""
+        params = _params(units=units, scale=scale, closed=closed, places=places)
         data = {"boundary": json.dumps(list(boundary))} if boundary is not None else None
         return CorrespondenceResponse(
             **self._post("/v1/correspondence", params, files=[("file", _part(scan))], data=data)

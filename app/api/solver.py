@@ -77,6 +77,7 @@ def _solve_task(
     vectors: bool,
     footprint: bool,
     place_with: str | None = None,
+    relaxed: bool = False,
 ) -> Solved:
     """The worker's task: a solve, with a memory failure answered without its traceback.
 
@@ -86,13 +87,13 @@ def _solve_task(
     solved: a small patch after a failed large grid found ~8 MB of a 120 MB cap free and failed
     too, or not, by how far the large solve had got. The new error is raised once the handler
     has let the old one go, so the worker is back at its idle size when it answers. With
-    ``place_with`` (the correspondence graph's path) the part is placed here too, under the same
-    cap and deadline.
+    ``place_with`` (the correspondence graph's path) the part is placed here too (its places
+    ``relaxed`` where asked), under the same cap and deadline.
     """
     try:
         placing = place_with is not None
         solved = solve_bytes(data, file_type, options, vectors=vectors, footprint=footprint, descriptors=placing)
-        return replace(solved, places=places_in_worker(place_with, solved.part)) if placing else solved
+        return replace(solved, places=places_in_worker(place_with, solved.part, relaxed)) if placing else solved
     except MemoryError:
         pass
     gc.collect()
@@ -171,13 +172,16 @@ class SolverPool:
         vectors: bool = True,
         footprint: bool = False,
         place_with: Path | None = None,
+        relaxed: bool = False,
     ) -> Solved:
         """The solve with (``vectors``) its eigenfunctions and their vertices' provenance,
         (``footprint``) where the shape lies (:mod:`app.geometry.overlap`) and, with ``place_with``
         (the correspondence graph's path), what that network reads of it
-        (:mod:`app.geometry.descriptors`) and where it places it."""
+        (:mod:`app.geometry.descriptors`) and where it places it (``relaxed``: those places relaxed
+        toward the part's edge lengths, :mod:`app.inference.relaxation`)."""
         async with self.limiter:
-            task = (data, file_type, options, vectors, footprint, str(place_with) if place_with is not None else None)
+            graph = str(place_with) if place_with is not None else None
+            task = (data, file_type, options, vectors, footprint, graph, relaxed)
             future = self._pool.schedule(_solve_task, args=task, timeout=self.timeout_s)
             try:
                 solved: Solved = await asyncio.wrap_future(future)

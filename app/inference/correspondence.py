@@ -23,6 +23,7 @@ from app.geometry.laplacian import Operators
 from app.geometry.placing import Part
 from app.inference.cover import Cover
 from app.inference.nesting import NESTED_BELOW_KEY
+from app.inference.relaxation import part_edges, relaxed_places
 from app.inference.template import RegionBoundaries, Template
 
 # A part's region is where its area, carried to the template by its places, lies dense. Each
@@ -181,25 +182,30 @@ class PlacingGraph:
         self.nested_below = float(metadata.get(NESTED_BELOW_KEY, 0.0))
         self.uncertain_below = float(metadata.get(UNCERTAIN_BELOW_KEY, 0.0))
 
-    def run(self, part: Part) -> Places:
+    def run(self, part: Part, relaxed: bool = False) -> Places:
         """The places of the part's own vertices: the graph run on what it reads of the part (the
-        part, or its collapsed copy), its places handed to the part's vertices."""
+        part, or its collapsed copy), its places (``relaxed``: relaxed toward that part's edge
+        lengths, :mod:`app.inference.relaxation`) handed to the part's vertices."""
         started = time.perf_counter()
         position, confidence = self.session.run(None, part.inputs.feeds())
         if not (np.isfinite(position).all() and np.isfinite(confidence).all()):
             raise ValueError("the correspondence graph returned non-finite places")
-        return part.expand(Places(position, confidence, (time.perf_counter() - started) * 1e3))
+        graph_ms = (time.perf_counter() - started) * 1e3
+        if relaxed:
+            inputs = part.inputs
+            position = relaxed_places(position, confidence, inputs.points.astype(np.float64), part_edges(inputs))
+        return part.expand(Places(position, confidence, graph_ms))
 
 
 _WORKER_GRAPHS: dict[str, PlacingGraph] = {}
 
 
-def places_in_worker(path: str, part: Part) -> Places:
-    """The graph at ``path`` run on one part (its places on the part's own vertices), its session
-    made once per worker process."""
+def places_in_worker(path: str, part: Part, relaxed: bool = False) -> Places:
+    """The graph at ``path`` run on one part (its places on the part's own vertices, ``relaxed``
+    or as the network gave them), its session made once per worker process."""
     if path not in _WORKER_GRAPHS:
         _WORKER_GRAPHS[path] = PlacingGraph(Path(path))
-    return _WORKER_GRAPHS[path].run(part)
+    return _WORKER_GRAPHS[path].run(part, relaxed)
 
 
 class CorrespondenceModel:

@@ -132,7 +132,9 @@ def test_scans_placed_once_are_united_as_spectra_with_their_regions(service, sca
     """The client's correspondence and regions: two scans placed one by one, then sent back as
     spectra with their region tokens, are localized and united as the uploads are."""
     placed = [service.correspondence(scan) for scan in scans]
-    assert all(part.vertices == len(part.position) for part in placed)
+    assert all(part.vertices == len(part.position) and part.places == "network" for part in placed)
+    relaxed = service.correspondence(scans[0], places="relaxed")
+    assert relaxed.places == "relaxed" and relaxed.vertex_indices == placed[0].vertex_indices
     spectra, regions = [p.eigenvalues for p in placed], [p.region.token for p in placed]
     by_files = service.localize(files=scans)
     by_spectra = service.localize(spectra=spectra, regions=regions)

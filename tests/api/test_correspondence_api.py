@@ -60,6 +60,26 @@ def test_a_template_part_is_placed_on_itself(client, samples, template):
     assert coverage["head"] < 0.3 and coverage["hips"] > 0.7 and coverage["torso"] > 0.7
 
 
+def test_relaxed_places_lie_closer_to_the_truth_and_say_so(client, samples):
+    """Asked for relaxed places, the answer says so (JSON and .npz), every vertex still answered,
+    and they lie closer to the truth (a template part's vertices are their own places) than the
+    network's: 2.0 → 1.4 cm on average on the README's part."""
+    name = "no_left_forearm_hand.ply"
+    mesh = trimesh.load(io.BytesIO(samples[name]), file_type="ply", process=False)
+    network = _correspond(client, name, samples[name]).json()
+    relaxed = _correspond(client, name, samples[name], places="relaxed").json()
+    assert (network["places"], relaxed["places"]) == ("network", "relaxed")
+    assert relaxed["vertex_indices"] == network["vertex_indices"]
+    truth = np.asarray(mesh.vertices)[np.array(relaxed["vertex_indices"])]
+    network_error, relaxed_error = (
+        np.linalg.norm(np.array(body["position"]) - truth, axis=1).mean() for body in (network, relaxed)
+    )
+    assert relaxed_error < 0.8 * network_error
+    arrays = np.load(io.BytesIO(_correspond(client, name, samples[name], places="relaxed", format="npz").content))
+    assert str(arrays["places"]) == "relaxed"
+    np.testing.assert_allclose(arrays["position"], relaxed["position"], atol=1e-4)
+
+
 def test_a_service_with_a_smaller_budget_answers_every_vertex_through_a_coarser_copy(tmp_path, samples):
     """``placed_vertices`` set to 2 000: the 9 k-vertex part is read through a copy of ~2 000
     vertices (so its vertices share ~2 000 places), and still every uploaded vertex gets its
