@@ -8,7 +8,8 @@ identities, camera views) and per variant (mesh, re-meshed, point cloud):
 
 - place error on the template (cm, area-weighted over each part's vertices, then averaged over
   parts), the share of vertices within 5 and 10 cm, beside the template's area centroid for
-  every vertex (what an uninformed regression shrinks to);
+  every vertex (what an uninformed regression shrinks to), and of the places relaxed toward the
+  part's edge lengths (what ``/v1/correspondence?places=relaxed`` answers);
 - left/right flips: parts whose places lie nearer the mirror image of the truth than the truth;
 - region IoU (area-weighted, plain and mirror-allowed) of the reached region against the true
   one, beside the whole body (IoU = the true area share), the spectral localizer, and the same
@@ -54,6 +55,8 @@ class PartScore:
     within_5: float
     within_10: float
     centroid_error_cm: float
+    relaxed_error_cm: float
+    relaxed_within_10: float
     flipped: bool
     iou: float
     iou_mirror: float
@@ -85,6 +88,7 @@ def coverage_error(share: np.ndarray, truth: np.ndarray, template: Template, are
 def score_part(
     part: dict[str, np.ndarray],
     placement: Placement,
+    relaxed: np.ndarray,
     cover: Cover,
     truth: np.ndarray,
     localized: np.ndarray,
@@ -93,12 +97,14 @@ def score_part(
     vertex_area: np.ndarray,
     warned: bool,
 ) -> PartScore:
-    """One part's figures (see the module docstring); ``perfect``: the region the rule reads
-    from the part's true places; ``warned``: whether its answer warns of uncertain places."""
+    """One part's figures (see the module docstring); ``relaxed``: its places relaxed toward its
+    edge lengths; ``perfect``: the region the rule reads from the part's true places;
+    ``warned``: whether its answer warns of uncertain places."""
     rest = template.vertices
     weight = part["mass"] / part["mass"].sum()
     target = part["target"]
     error = np.linalg.norm(placement.position - rest[target], axis=1)
+    relaxed_error = np.linalg.norm(relaxed - rest[target], axis=1)
     mirrored = np.linalg.norm(placement.position - rest[template.mirror[target]], axis=1)
     centroid = (vertex_area @ rest) / vertex_area.sum()
     plain, mirror = region_scores(np.stack([cover.region, localized, perfect]), truth, template, vertex_area)
@@ -107,6 +113,8 @@ def score_part(
         within_5=float(weight @ (error <= 0.05)),
         within_10=float(weight @ (error <= 0.10)),
         centroid_error_cm=100 * float(weight @ np.linalg.norm(centroid - rest[target], axis=1)),
+        relaxed_error_cm=100 * float(weight @ relaxed_error),
+        relaxed_within_10=float(weight @ (relaxed_error <= 0.10)),
         flipped=bool(weight @ mirrored < weight @ error),
         iou=float(plain.iou[0]),
         iou_mirror=float(mirror.iou[0]),
@@ -133,7 +141,9 @@ def evaluate_correspondence(parts_dir: Path, graph: Path, models: Path) -> dict:
         rows: dict[str, list[PartScore]] = {variant: [] for variant in VARIANTS}
         for part in parts:
             truth = np.unpackbits(part["mask"], count=n).astype(bool)
-            placement = model.place(served_part(part))
+            placing = served_part(part)
+            placement = model.place(placing)
+            relaxed = model.graph.run(placing, relaxed=True).position
             cover = model.cover(placement)
             body = np.asarray(shapes[int(part["shape"])], dtype=np.float64)
             spectrum = task_spectrum(body, template.faces, truth, str(part["variant"]), served.k)
@@ -145,6 +155,7 @@ def evaluate_correspondence(parts_dir: Path, graph: Path, models: Path) -> dict:
                 score_part(
                     part,
                     placement,
+                    relaxed,
                     cover,
                     truth,
                     localized_mask,
