@@ -98,17 +98,17 @@ async def correspondence(
         PlacesKind,
         Query(
             description="relaxed: the network's places relaxed toward the part's own edge lengths, then everything "
-            "else read from them: on held-out anny parts a fifth to a third closer to the true places (camera views "
-            "3.1 → 2.4–3.1 cm), the region within about a point of the network's either way; ~45 ms more for a "
-            "6 000-vertex part."
+            "else read from them: on held-out anny parts a fifth to a third closer to the true places on average "
+            "(camera views 3.1–3.8 → 2.4–3.1 cm), the region within about a point of the network's either way; "
+            "~45 ms more for a 6 000-vertex part."
         ),
     ] = "network",
     format: Annotated[
         Literal["json", "npz", "ply"],
         Query(
-            description="npz: NPY arrays position, confidence, template_vertex, vertex_indices, placed_on, places and "
-            "region; ply: the "
-            "part as the service read it, each vertex coloured by its template place (x, y, z → red, green, blue)."
+            description="npz: NPY arrays position, confidence, template_vertex, vertex_indices, placed_on, places "
+            "and region; ply: the part as the service read it, each vertex coloured by its template place (x, y, z "
+            "→ red, green, blue)."
         ),
     ] = "json",
 ) -> CorrespondenceResponse | Response:
