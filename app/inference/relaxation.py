@@ -20,6 +20,7 @@ the training people.
 import numpy as np
 
 from app.geometry.descriptors import PartInputs
+from app.geometry.topology import half_edges
 
 RELAXATION_STEPS = 60
 STIFFNESS = 0.5  # of an edge's length error corrected per step, shared by its two ends
@@ -30,8 +31,7 @@ def part_edges(inputs: PartInputs) -> np.ndarray:
     """(m, 2) each edge of the part once, lower vertex first: a mesh's face edges, a cloud's
     stencil neighbours (its padding, a point's own index, left out)."""
     if inputs.faces is not None:
-        f = inputs.faces
-        pairs = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        pairs = half_edges(inputs.faces)
     else:
         table = inputs.stencil.neighbours
         pairs = np.column_stack([np.repeat(np.arange(len(table)), table.shape[1]), table.reshape(-1)])
