@@ -22,7 +22,8 @@ identities, camera views) and per variant (mesh, re-meshed, point cloud):
 Pairs of parts of one person (:mod:`training.correspondence.pairs`): the overlap measured from
 the two reached regions against the true one, and the union told it or not, or told the pair
 nested where its spectra allow it and its inner candidate is placed uncertainly
-(:mod:`app.inference.nesting`).
+(:mod:`app.inference.nesting`); per kind of pair and per overlap stratum (the union
+evaluation's, by the pair's true overlap).
 """
 
 from dataclasses import dataclass
@@ -41,6 +42,7 @@ from app.inference.template import Template
 from training.correspondence.pairs import PAIR_SETS, VALIDATION_SETS, load_pairs
 from training.correspondence.parts import VARIANTS
 from training.correspondence.train import load_parts
+from training.data.pairs import overlap_strata
 from training.data.spectra import task_spectrum
 from training.learning.baselines import elementwise_min
 from training.learning.masks import present_part_coverage, symmetric_scores
@@ -189,22 +191,24 @@ def evaluate_pairs(parts_dir: Path, graph: Path, models: Path) -> dict:
     model = CorrespondenceModel(graph, served.template_regions)
     validation = [row for name in VALIDATION_SETS for row in pair_rows(parts_dir, name, model, served)]
     chosen = choose_thresholds(validation)
-    tests = {name: summary(pair_rows(parts_dir, name, model, served), chosen) for name in PAIR_SETS}
+    tests = {name: pair_rows(parts_dir, name, model, served) for name in PAIR_SETS}
     return {
         "tell_below": chosen.tell_below,
         "nested_below": chosen.nested_below,
         "uncertain_below": uncertain_threshold(validation),
         "uncertain_percentile": UNCERTAIN_PERCENTILE,
         "validation": summary(validation, chosen)["all"],
-        "sets": tests,
+        "sets": {name: summary(rows, chosen) for name, rows in tests.items()},
+        "strata": {name: summary(rows, chosen, by="stratum", overall=False) for name, rows in tests.items()},
     }
 
 
 def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: SpectralModels) -> list[dict]:
-    """Per pair of set ``name``: its kind, the overlap and boundary share measured from the
-    parts' regions and their errors, the union's error untold / told the measured shares / told
-    the true ones beside the elementwise minimum, and the union's region IoU beside the whole body
-    and the spectral localizer (the union of the localized parts, as /v1/localize answers spectra)."""
+    """Per pair of set ``name``: its kind and overlap stratum (by its true overlap, as the union's
+    evaluation divides pairs), the overlap and boundary share measured from the parts' regions
+    and their errors, the union's error untold / told the measured shares / told the true ones
+    beside the elementwise minimum, and the union's region IoU beside the whole body and the
+    spectral localizer (the union of the localized parts, as /v1/localize answers spectra)."""
     regions, n, area = served.template_regions, len(served.template.vertices), served.vertex_area
     rows = []
     for pair in load_pairs(parts_dir, name):
@@ -224,9 +228,12 @@ def pair_rows(parts_dir: Path, name: str, model: CorrespondenceModel, served: Sp
         plain, mirrored = region_scores(
             np.stack([placed[0].region | placed[1].region, localized]), union, served.template, area
         )
+        same_region = np.array_equal(a, b)
+        identical = same_region and np.array_equal(*spectra)
         rows.append(
             {
                 "kind": str(pair["kind"]),
+                "stratum": str(overlap_strata(np.array(true[0]), np.array(same_region), np.array(identical))),
                 "measured_overlap": measured[0],
                 "overlap_error": abs(measured[0] - true[0]),
                 "boundary_error": abs(measured_edge[0] - true_edge[0]),
@@ -289,21 +296,23 @@ def choose_thresholds(rows: list[dict]) -> Thresholds:
     return Thresholds(tell, nested)
 
 
-def summary(rows: list[dict], chosen: Thresholds) -> dict[str, dict]:
-    """Mean figures per kind and over all rows, with the served error and the share of pairs
-    told nested under ``chosen``."""
-    kinds: dict[str, list[dict]] = {}
+def summary(rows: list[dict], chosen: Thresholds, by: str = "kind", overall: bool = True) -> dict[str, dict]:
+    """Mean figures per group of rows (their ``by``: kind or stratum) and, with ``overall``,
+    over all rows (``all``), with the served error and the share of pairs told nested under
+    ``chosen``."""
+    groups: dict[str, list[dict]] = {}
     for row in rows:
-        kinds.setdefault(row["kind"], []).append(row)
-    kinds["all"] = rows
+        groups.setdefault(row[by], []).append(row)
+    if overall:
+        groups["all"] = rows
     out = {}
-    for kind, members in sorted(kinds.items()):
+    for group, members in sorted(groups.items()):
         numbers = [
-            {k: v for k, v in row.items() if k not in ("kind", "inner_confidence", "confidences")}
+            {k: v for k, v in row.items() if k not in ("kind", "stratum", "inner_confidence", "confidences")}
             | {"served": served_error(row, chosen), "nested": float(told_nested(row, chosen))}
             for row in members
         ]
-        out[kind] = {"pairs": len(members)} | _means(numbers)
+        out[group] = {"pairs": len(members)} | _means(numbers)
     return out
 
 

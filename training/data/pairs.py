@@ -20,6 +20,20 @@ MIN_GAIN = 0.02  # full and partial pairs: each part adds this much of the body 
 # A smaller part this much inside the other is nested in it: template masks of views are cut along
 # triangle edges, so a close-up a camera takes inside a far view may poke out by a face.
 NESTED_SHARE = 0.98
+# Overlap strata: how much of the smaller part lies inside the other. "identical" is one spectrum
+# twice (same region, body and meshing), "same_region" the region again in another pose or meshing.
+STRATA = ("identical", "same_region", "nested", "over_75", "25_to_75", "under_25")
+
+
+def overlap_strata(inside: np.ndarray, same_region: np.ndarray, identical: np.ndarray) -> np.ndarray:
+    """The overlap stratum (a name of :data:`STRATA`) of each pair, from the share of its smaller
+    part inside the other (``inside``) and whether its parts are one region (``same_region``),
+    and that region on one body and meshing (``identical``): the first that applies."""
+    return np.select(
+        [identical, same_region, inside >= NESTED_SHARE, inside > 0.75, inside >= 0.25],
+        list(STRATA[:5]),
+        default=STRATA[5],
+    )
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from app.contract import (
 from app.inference.models import chained_sigma
 from app.inference.template import localized_region
 from training.data.overlaps import CAMERA
-from training.data.pairs import FULL_COVERAGE, NESTED_SHARE, PARTIAL_UNION
+from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION, STRATA, overlap_strata
 from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
 from training.learning.baselines import UnionLookup, disjoint_union, elementwise_min, larger_part
 from training.learning.data import PairTable, SpectralData
@@ -34,9 +34,6 @@ from training.learning.spectral_errors import spectral_errors
 GROUPS = ("known_man", "unknown_man", "unknown_woman", "known_woman", "child")
 SPLITS = ("test_a", "test_b")
 NOISE_FLOOR_REGIONS = 100
-# Overlap strata: how much of the smaller part lies inside the other. "identical" is one spectrum
-# twice (same region, body and meshing), "same_region" the region again in another pose or meshing.
-STRATA = ("identical", "same_region", "nested", "over_75", "25_to_75", "under_25")
 
 # The paper's figures (its Tables 1-3), keyed like our rows: (mse, mae) and (IoU %, accuracy %).
 PAPER_UNION = {
@@ -97,11 +94,7 @@ def strata(data: SpectralData, rows: PairTable) -> np.ndarray:
     inside = data.overlap_shares(rows.mask_a, rows.mask_b)
     same_region = rows.mask_a == rows.mask_b
     identical = same_region & (rows.shape_a == rows.shape_b) & (rows.variant == MESH)
-    return np.select(
-        [identical, same_region, inside >= NESTED_SHARE, inside > 0.75, inside >= 0.25],
-        list(STRATA[:5]),
-        default=STRATA[5],
-    )
+    return overlap_strata(inside, same_region, identical)
 
 
 @dataclass
