@@ -66,12 +66,18 @@ class PartsPreset:
     test_parts: int  # per test set and variant
     test_pairs: int  # draws per pair set (a region pair, or a session's five pairs)
 
+    def __post_init__(self) -> None:
+        # A validation pair puts its parts on two of a training person's training poses (all but
+        # the last), as a test pair does on two of an unseen person's.
+        if self.poses < 3:
+            raise ValueError(f"a parts build needs at least 3 poses per identity, not {self.poses}")
+
 
 PARTS_PRESETS = {
     preset.name: preset
     for preset in (
         PartsPreset(
-            name="tiny", train_identities=2, test_identities=2, poses=2, train_parts=12, test_parts=2, test_pairs=2
+            name="tiny", train_identities=2, test_identities=2, poses=3, train_parts=12, test_parts=2, test_pairs=2
         ),
         PartsPreset(
             name="standard",
