@@ -193,7 +193,7 @@ class PlacingGraph:
         graph_ms = (time.perf_counter() - started) * 1e3
         if relaxed:
             inputs = part.inputs
-            position = relaxed_places(position, confidence, inputs.points.astype(np.float64), part_edges(inputs))
+            position = relaxed_places(position, confidence, inputs.points, part_edges(inputs))
         return part.expand(Places(position, confidence, graph_ms))
 
 

@@ -48,7 +48,7 @@ def relaxed_places(places: np.ndarray, confidence: np.ndarray, points: np.ndarra
     each pulled back toward its network place by its ``confidence`` (n,)."""
     n = len(places)
     first, second = edges[:, 0], edges[:, 1]
-    own = _lengths(_edge_vectors(np.ascontiguousarray(points.T), first, second))
+    own = _lengths(_edge_vectors(np.ascontiguousarray(points.T, dtype=np.float64), first, second))
     anchor = np.ascontiguousarray(places.T, dtype=np.float64)  # (3, n): each coordinate a row
     placed = _lengths(_edge_vectors(anchor, first, second))
     usable = own > 0
