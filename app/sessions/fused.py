@@ -1,0 +1,238 @@
+"""The spectrum of a union of views that share one frame, solved once on the views themselves.
+
+Chaining the learned union operator feeds each prediction back in, and its error compounds: on
+anny sessions of 12 and 24 views it is tens of per cent off where the views fused here are a few
+(``docs/decisions/036-a-session-is-solved-on-its-fused-views.md``). Where the views' geometry is
+at hand in one frame (a tracked scanner's), nothing needs predicting: the union is the views'
+points, each surface point counted once (the largest view's where views overlap, so any order or
+grouping of the views gives one union), with the Dirichlet boundary where a view stops and no
+other view goes on, and its spectrum is solved once, as an uploaded point cloud is.
+
+What decides the answer is the union's boundary. A view's boundary point is inside the union
+where another view's inside is within reach (the local spacing of either view, at least
+:data:`MIN_TOLERANCE_M`); where two views stop side by side facing each other, the gap between
+them is a seam, not a boundary; where both stop at one place on the same side (a re-scan), the
+union stops there too. The points left on the boundary are joined into loops (along each view's
+boundary edges, and across views where their loose ends meet); a closed loop no longer than
+:data:`~app.contract.MAX_HOLE_EDGES` boundary edges is a pin-hole between views and is capped
+(its points freed, a point at its centre added), as the spectrum definition caps a mesh's
+pin-holes: without it, the gaps views leave between them pin a nearly closed union to zero and
+every eigenvalue comes out too high.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from app.contract import MAX_HOLE_EDGES
+from app.geometry.pipeline import SpectrumOptions, cloud_spectrum
+from app.geometry.shapes import PointCloud
+from app.geometry.topology import boundary_half_edges
+
+MIN_TOLERANCE_M = 0.003  # a few mm: one scanner's registered views rarely agree better
+BRIDGE = 1.5  # of the coarser local spacing: two views' loose ends this near, facing, are one seam
+INWARD_NEIGHBOURS = 8  # a boundary point's own neighbours that say which way its view lies
+DUPLICATE = 0.5  # of the finer local spacing: a later view's point this near an earlier one's is the same point
+
+
+@dataclass(frozen=True)
+class View:
+    """One view's surface in the session's frame: ``points`` (n, 3) metres, ``mass`` (n,) the
+    lumped area of each (m²), ``boundary`` (n,) its boundary points, ``edges`` (e, 2) the
+    boundary edges joining them (a mesh's boundary half-edges; for a point cloud, each boundary
+    point to its nearest boundary neighbours)."""
+
+    points: np.ndarray
+    mass: np.ndarray
+    boundary: np.ndarray
+    edges: np.ndarray
+
+    @property
+    def reach(self) -> np.ndarray:
+        """(n,) how far each point's own neighbours lie (its second nearest): the view's local
+        spacing, fine on a face or a hand, coarse on the back."""
+        if len(self.points) < 3:
+            return np.full(len(self.points), MIN_TOLERANCE_M)
+        distance, _ = cKDTree(self.points).query(self.points, k=3)
+        return np.maximum(distance[:, 2], MIN_TOLERANCE_M)
+
+
+@dataclass(frozen=True)
+class FusedCloud:
+    """The union as one point cloud: ``points`` (n, 3), ``boundary`` (n,) held at zero, and how
+    many pin-holes between views were capped."""
+
+    points: np.ndarray
+    boundary: np.ndarray
+    capped: int
+
+
+def _near(
+    view: View, reach: np.ndarray, tree: cKDTree, other_reach: np.ndarray, scale: float = 1.0, nearer: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which points of ``view`` lie on the other view (its nearest point within either's local
+    spacing, or with ``nearer`` the smaller of the two, times ``scale``), and that nearest point
+    (0 where none)."""
+    bound = scale * max(float(reach.max(initial=0.0)), float(other_reach.max(initial=0.0)))
+    distance, nearest = tree.query(view.points, distance_upper_bound=bound)
+    found = np.isfinite(distance)
+    near = np.zeros(len(distance), bool)
+    pick = np.minimum if nearer else np.maximum
+    near[found] = distance[found] <= scale * pick(reach[found], other_reach[nearest[found]])
+    return near, np.where(near, nearest, 0)
+
+
+def fused_cloud(views: list[View]) -> FusedCloud:
+    """The union of ``views`` (one frame): each surface point once (the larger view's where two
+    cover it), its boundary where a view stops and no other's inside goes on, the pin-holes
+    between views capped. Costs a k-d tree query per pair of views."""
+    views = sorted(views, key=_canonical)
+    trees = [cKDTree(view.points) for view in views]
+    reaches = [view.reach for view in views]
+    kept = [np.ones(len(view.points), bool) for view in views]
+    loose = [view.boundary.copy() for view in views]  # boundary points no other view's inside covers
+    for i, view in enumerate(views):
+        for j, other in enumerate(views):
+            if i == j:
+                continue
+            near, nearest = _near(view, reaches[i], trees[j], reaches[j])
+            inside = near & ~other.boundary[nearest]
+            if j < i:  # a larger view's inside, or one of its points, is already there
+                kept[i] &= ~(inside | _near(view, reaches[i], trees[j], reaches[j], scale=DUPLICATE, nearer=True)[0])
+            loose[i] &= ~inside
+    _bridge(views, trees, reaches, loose)
+    pinholes, centres = _pinholes(views, trees, reaches, loose, kept)
+    points, boundary = [], []
+    for view, keep, edge, hole in zip(views, kept, loose, pinholes, strict=True):
+        points.append(view.points[keep])
+        boundary.append((edge & ~hole)[keep])
+    cloud, flags = np.concatenate(points + [centres]), np.concatenate(boundary + [np.zeros(len(centres), bool)])
+    flags |= _edges_of_dropped(views, kept, loose, pinholes, cloud)
+    return FusedCloud(cloud, flags, len(centres))
+
+
+def _inward(view: View, points: np.ndarray) -> np.ndarray:
+    """(m, 3) unit directions from each of ``points`` (boundary points of ``view``) into the
+    view: towards the mean of its nearest points."""
+    _, nearest = cKDTree(view.points).query(points, k=min(INWARD_NEIGHBOURS, len(view.points)))
+    direction = view.points[nearest].mean(axis=1) - points
+    return direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
+
+
+def _bridge(views: list[View], trees: list[cKDTree], reaches: list[np.ndarray], loose: list[np.ndarray]) -> None:
+    """Two views that stop side by side, facing each other across less than a spacing, join
+    there (the gap between them is a seam, not a boundary): their loose points that meet a loose
+    point of the other view going the other way are no longer loose. Two views that stop at one
+    place on the same side (a re-scan) keep that boundary."""
+    inward = [np.zeros((len(view.points), 3)) for view in views]
+    for view, edge, direction in zip(views, loose, inward, strict=True):
+        if edge.any():
+            direction[edge] = _inward(view, view.points[edge])
+    joined = [np.zeros(len(view.points), bool) for view in views]
+    for i, view in enumerate(views):
+        for j in range(len(views)):
+            if i == j or not loose[i].any() or not loose[j].any():
+                continue
+            near, nearest = _near(view, reaches[i], trees[j], reaches[j], scale=BRIDGE)
+            meets = loose[i] & near & loose[j][nearest]
+            facing = np.einsum("ij,ij->i", inward[i][meets], inward[j][nearest[meets]]) < 0
+            joined[i][np.flatnonzero(meets)[facing]] = True
+    for edge, join in zip(loose, joined, strict=True):
+        edge &= ~join
+
+
+def _canonical(view: View) -> tuple[float, int, float]:
+    """The order views are fused in, whatever order they came in: the largest first (its points
+    stand where views overlap), so that any order or grouping of one session's views gives one
+    union."""
+    return (-float(view.mass.sum()), -len(view.points), float(view.points.sum()))
+
+
+def _pinholes(
+    views: list[View], trees: list[cKDTree], reaches: list[np.ndarray], loose: list[np.ndarray], kept: list[np.ndarray]
+) -> tuple[list[np.ndarray], np.ndarray]:
+    """Which loose boundary points lie on a pin-hole between views (a closed loop of at most
+    MAX_HOLE_EDGES of the views' boundary edges, each stretch counted once: by the points the
+    union keeps), and each such hole's centre."""
+    offsets = np.cumsum([0] + [len(view.points) for view in views])
+    rows, cols, lengths = [], [], np.zeros(offsets[-1])
+    for i, view in enumerate(views):
+        a, b = view.edges[:, 0], view.edges[:, 1]
+        both = loose[i][a] & loose[i][b]
+        rows.append(a[both] + offsets[i])
+        cols.append(b[both] + offsets[i])
+        length = np.linalg.norm(view.points[a[both]] - view.points[b[both]], axis=1)
+        np.add.at(lengths, a[both] + offsets[i], kept[i][a[both]] * length / 2)
+        np.add.at(lengths, b[both] + offsets[i], kept[i][b[both]] * length / 2)
+        for j in range(len(views)):
+            if i == j or not loose[i].any() or not loose[j].any():
+                continue
+            near, nearest = _near(view, reaches[i], trees[j], reaches[j], scale=2.0)
+            meets = np.flatnonzero(loose[i] & near & loose[j][nearest])
+            rows.append(meets + offsets[i])
+            cols.append(nearest[meets] + offsets[j])
+    size = offsets[-1]
+    graph = sp.coo_matrix((np.ones(sum(map(len, rows))), (np.concatenate(rows), np.concatenate(cols))), (size, size))
+    graph = (graph + graph.T).tocsr()
+    graph.data[:] = 1
+    _, label = connected_components(graph, directed=False)
+    on_loop = np.concatenate(loose)
+    spacing = np.median([_edge_length(view) for view in views if len(view.edges)] or [0.0])
+    count = label.max() + 1
+    loop_length = np.bincount(label, weights=lengths * on_loop, minlength=count)
+    loop_points = np.bincount(label, weights=on_loop, minlength=count)
+    # A loop closes: every point on it has two neighbours. A piece of a long boundary whose
+    # ends the other views' insides cut off is not a hole.
+    open_ends = np.bincount(label, weights=on_loop & (np.diff(graph.indptr) < 2), minlength=count)
+    small = (loop_points > 0) & (open_ends == 0) & (loop_length <= MAX_HOLE_EDGES * spacing)
+    hole = on_loop & small[label]
+    everything = np.concatenate([view.points for view in views])
+    centres = [everything[hole & (label == loop)].mean(axis=0) for loop in np.unique(label[hole])]
+    split = [hole[offsets[i] : offsets[i + 1]] for i in range(len(views))]
+    return split, np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+
+
+def _edge_length(view: View) -> float:
+    """The median length of a view's boundary edges."""
+    return float(np.median(np.linalg.norm(view.points[view.edges[:, 0]] - view.points[view.edges[:, 1]], axis=1)))
+
+
+def _edges_of_dropped(
+    views: list[View], kept: list[np.ndarray], loose: list[np.ndarray], pinholes: list[np.ndarray], cloud: np.ndarray
+) -> np.ndarray:
+    """The union's boundary where it runs through points dropped as duplicates (a re-scan that
+    stops where the first scan stops): the kept point each such point fell on is flagged."""
+    parts = zip(views, kept, loose, pinholes, strict=True)
+    dropped = [view.points[edge & ~hole & ~keep] for view, keep, edge, hole in parts]
+    points = np.concatenate(dropped)
+    flags = np.zeros(len(cloud), bool)
+    if len(points):
+        flags[cKDTree(cloud).query(points)[1]] = True
+    return flags
+
+
+def view_of(points: np.ndarray, mass: np.ndarray, boundary: np.ndarray, faces: np.ndarray | None) -> View:
+    """A solved part as a view: a mesh's boundary edges from its faces; a point cloud's joining
+    each boundary point to its two nearest boundary neighbours (a boundary is a curve)."""
+    if faces is not None:
+        edges = boundary_half_edges(faces)
+    else:
+        ends = np.flatnonzero(boundary)
+        if len(ends) > 2:
+            _, nearest = cKDTree(points[ends]).query(points[ends], k=3)
+            edges = np.column_stack([np.repeat(ends, 2), ends[nearest[:, 1:]].ravel()])
+        else:
+            edges = np.empty((0, 2), np.int64)
+    return View(np.asarray(points, np.float64), np.asarray(mass, np.float64), np.asarray(boundary, bool), edges)
+
+
+def fused_spectrum(views: list[View], k: int) -> np.ndarray:
+    """The first ``k`` eigenvalues of the views' union (:func:`fused_cloud`), solved as an
+    uploaded point cloud is: Dirichlet on its boundary, or closed where none is left."""
+    cloud = fused_cloud(views)
+    closed = not cloud.boundary.any()
+    shape = PointCloud(cloud.points, None if closed else cloud.boundary)
+    return np.asarray(cloud_spectrum(shape, SpectrumOptions(k=k, closed=closed)).eigenvalues)

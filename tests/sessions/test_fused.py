@@ -1,0 +1,116 @@
+"""The union of views in one frame, solved once, against analytic Dirichlet spectra of flat
+rectangles (λ = π²(m²/W² + n²/H²)) and the laws a union obeys."""
+
+import numpy as np
+import pytest
+
+from app.geometry.laplacian import mesh_operators
+from app.geometry.shapes import Mesh
+from app.geometry.topology import boundary_vertex_mask
+from app.sessions.fused import View, fused_cloud, fused_spectrum, view_of
+from tests.conftest import grid
+
+K = 8
+
+
+def rectangle_spectrum(width: float, height: float, k: int = K) -> np.ndarray:
+    m, n = np.meshgrid(np.arange(1, 12), np.arange(1, 12))
+    return np.sort((np.pi**2 * ((m / width) ** 2 + (n / height) ** 2)).ravel())[:k]
+
+
+def view(x0: float, x1: float, step: float, y1: float = 1.0, shift: float = 0.0) -> View:
+    """A flat rectangle [x0, x1] × [0, y1] meshed at about ``step``, its vertices nudged by
+    ``shift`` (two views of one surface seldom share their vertices)."""
+    nx, ny = round((x1 - x0) / step), round(y1 / step)
+    mesh = grid(x1 - x0, y1, nx, ny)
+    points = mesh.vertices + [x0, 0.0, 0.0]
+    points[:, :2] += shift * np.array([0.37, 0.61])
+    operators = mesh_operators(points, mesh.faces)
+    boundary = boundary_vertex_mask(mesh.faces, len(points))
+    return view_of(points, operators.mass.diagonal(), boundary, mesh.faces)
+
+
+def relative(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.mean(np.abs(a - b) / b))
+
+
+def test_one_view_is_its_own_union():
+    single = view(0.0, 2.0, 0.04)
+    assert relative(fused_spectrum([single], K), rectangle_spectrum(2.0, 1.0)) < 0.02
+
+
+def test_two_overlapping_views_make_the_whole_rectangle():
+    """Left [0, 1.2] and right [0.8, 2] at other spacings: the union is [0, 2] × [0, 1], whose
+    spectrum is far below either view's (a 1.2 × 1 rectangle: λ₁ 16.7 against 12.3)."""
+    left, right = view(0.0, 1.2, 0.04), view(0.8, 2.0, 0.035, shift=0.011)
+    union = fused_spectrum([left, right], K)
+    assert relative(union, rectangle_spectrum(2.0, 1.0)) < 0.03
+    assert relative(union, rectangle_spectrum(1.2, 1.0)) > 0.2
+
+
+def test_views_that_meet_edge_to_edge_are_joined_along_the_seam():
+    """[0, 1] and [1.02, 2]: the two boundaries face each other across less than a spacing, so
+    the seam is inside the union, not two Dirichlet squares (λ₁ of a unit square: 19.7)."""
+    left, right = view(0.0, 1.0, 0.04), view(1.02, 2.0, 0.04)
+    union = fused_spectrum([left, right], K)
+    assert relative(union, rectangle_spectrum(2.0, 1.0)) < 0.03
+    assert union[0] < 0.75 * rectangle_spectrum(1.0, 1.0)[0]
+
+
+def test_a_rescan_that_stops_where_the_first_stops_keeps_that_boundary():
+    """The same rectangle twice, meshed differently: the union is the rectangle, its boundary
+    where both stop (on the same side) still held at zero."""
+    first, again = view(0.0, 2.0, 0.04), view(0.0, 2.0, 0.033, shift=0.004)
+    assert relative(fused_spectrum([first, again], K), rectangle_spectrum(2.0, 1.0)) < 0.03
+
+
+def test_a_view_inside_another_adds_nothing():
+    whole, patch = view(0.0, 2.0, 0.04), view(0.5, 1.1, 0.02, y1=0.6, shift=0.2)
+    alone = fused_spectrum([whole], K)
+    assert relative(fused_spectrum([whole, patch], K), alone) < 0.01
+    assert relative(fused_spectrum([patch, whole], K), alone) < 0.01
+
+
+def test_the_order_of_the_views_does_not_matter():
+    parts = [view(0.0, 0.9, 0.04), view(0.7, 1.5, 0.035, shift=0.01), view(1.3, 2.0, 0.03, shift=0.02)]
+    spectra = [fused_spectrum([parts[i] for i in order], K) for order in ((0, 1, 2), (2, 1, 0), (1, 0, 2))]
+    for other in spectra[1:]:
+        assert relative(other, spectra[0]) < 0.005
+
+
+def test_a_pinhole_left_between_views_is_capped():
+    """Two views that overlap everywhere but a small square gap between them (each view's notch
+    at the same place): the spectrum definition caps a hole of at most 8 edges, so the union is
+    the whole rectangle; the cloud says one hole was capped."""
+    step = 0.05
+    mesh = grid(2.0, 1.0, 40, 20)
+    x, y = mesh.vertices[:, 0], mesh.vertices[:, 1]
+    notch = (np.abs(x - 1.0) < step / 2) & (np.abs(y - 0.5) < step / 2)  # one vertex: a 6-edge hole
+    assert notch.sum() == 1
+
+    def cut(keep: np.ndarray) -> View:
+        faces = mesh.faces[keep[mesh.faces].all(axis=1)]
+        used = np.unique(faces)
+        renumber = np.full(len(keep), -1)
+        renumber[used] = np.arange(len(used))
+        part = Mesh(mesh.vertices[used], renumber[faces])
+        operators = mesh_operators(part.vertices, part.faces)
+        boundary = boundary_vertex_mask(part.faces, len(used))
+        return view_of(part.vertices, operators.mass.diagonal(), boundary, part.faces)
+
+    left, right = cut((x <= 1.2) & ~notch), cut((x >= 0.8) & ~notch)
+    cloud = fused_cloud([left, right])
+    assert cloud.capped == 1
+    assert relative(fused_spectrum([left, right], K), rectangle_spectrum(2.0, 1.0)) < 0.03
+
+
+def test_closed_views_make_a_closed_union():
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    points = np.asarray(sphere.vertices)
+    operators = mesh_operators(points, np.asarray(sphere.faces))
+    whole = view_of(points, operators.mass.diagonal(), np.zeros(len(points), bool), np.asarray(sphere.faces))
+    spectrum = fused_spectrum([whole, whole], K)
+    assert spectrum[0] == pytest.approx(0.0, abs=1e-6)
+    assert spectrum[1] == pytest.approx(2.0, rel=0.03)  # the unit sphere: l(l + 1)
