@@ -4,7 +4,8 @@
 
 Unseen anny people (identities drawn from their own seed, not the training's), each scanned as a
 front-end does: a camera at 8 azimuths around the body, each with a far view, a close-up and a
-re-scan (24 views in scanning order), then 8 views from above and below (32). Views arrive as
+re-scan (24 views in scanning order), then 8 views from above and below (up to 32: a view that sees
+no admissible region is left out, so a length a session does not reach has no row). Views arrive as
 meshes in the body's frame (registered) or re-meshed (30 % of vertices collapsed). The truth is
 the spectrum of the union of the views' template masks, solved by the service's own pipeline
 (pin-holes capped). Methods, mean relative error over λ₁…λ₂₀ per session length:
