@@ -36,6 +36,8 @@ MIN_TOLERANCE_M = 0.003  # a few mm: one scanner's registered views rarely agree
 BRIDGE = 1.5  # of the coarser local spacing: two views' loose ends this near, facing, are one seam
 INWARD_NEIGHBOURS = 8  # a boundary point's own neighbours that say which way its view lies
 DUPLICATE = 0.5  # of the finer local spacing: a later view's point this near an earlier one's is the same point
+MEET = 2.0  # of the coarser local spacing: two views' loose ends this near are one stretch of a loop
+FARTHEST = max(1.0, BRIDGE, MEET)  # the farthest any rule looks
 
 
 @dataclass(frozen=True)
@@ -50,15 +52,6 @@ class View:
     boundary: np.ndarray
     edges: np.ndarray
 
-    @property
-    def reach(self) -> np.ndarray:
-        """(n,) how far each point's own neighbours lie (its second nearest): the view's local
-        spacing, fine on a face or a hand, coarse on the back."""
-        if len(self.points) < 3:
-            return np.full(len(self.points), MIN_TOLERANCE_M)
-        distance, _ = cKDTree(self.points).query(self.points, k=3)
-        return np.maximum(distance[:, 2], MIN_TOLERANCE_M)
-
 
 @dataclass(frozen=True)
 class FusedCloud:
@@ -70,19 +63,38 @@ class FusedCloud:
     capped: int
 
 
-def _near(
-    view: View, reach: np.ndarray, tree: cKDTree, other_reach: np.ndarray, scale: float = 1.0, nearer: bool = False
-) -> tuple[np.ndarray, np.ndarray]:
-    """Which points of ``view`` lie on the other view (its nearest point within either's local
-    spacing, or with ``nearer`` the smaller of the two, times ``scale``), and that nearest point
-    (0 where none)."""
-    bound = scale * max(float(reach.max(initial=0.0)), float(other_reach.max(initial=0.0)))
-    distance, nearest = tree.query(view.points, distance_upper_bound=bound)
-    found = np.isfinite(distance)
-    near = np.zeros(len(distance), bool)
-    pick = np.minimum if nearer else np.maximum
-    near[found] = distance[found] <= scale * pick(reach[found], other_reach[nearest[found]])
-    return near, np.where(near, nearest, 0)
+def _reach(tree: cKDTree) -> np.ndarray:
+    """(n,) how far each point's own neighbours lie (its second nearest): the view's local
+    spacing, fine on a face or a hand, coarse on the back."""
+    if tree.n < 3:
+        return np.full(tree.n, MIN_TOLERANCE_M)
+    distance, _ = tree.query(tree.data, k=3)
+    return np.maximum(distance[:, 2], MIN_TOLERANCE_M)
+
+
+@dataclass(frozen=True)
+class _Pair:
+    """Where each point of one view finds its nearest point of another, up to the farthest any
+    rule here looks (FARTHEST times the coarser spacing): one k-d tree query per ordered pair,
+    which every rule reads at its own scale."""
+
+    distance: np.ndarray
+    nearest: np.ndarray  # 0 where none within reach
+    reach: np.ndarray  # the view's own local spacing at each point
+    other_reach: np.ndarray  # the other view's at each point's nearest
+
+    @classmethod
+    def of(cls, view: View, reach: np.ndarray, tree: cKDTree, other_reach: np.ndarray) -> "_Pair":
+        bound = FARTHEST * max(float(reach.max(initial=0.0)), float(other_reach.max(initial=0.0)))
+        distance, nearest = tree.query(view.points, distance_upper_bound=bound)
+        nearest = np.where(np.isfinite(distance), nearest, 0)
+        return cls(distance, nearest, reach, other_reach[nearest])
+
+    def near(self, scale: float = 1.0, nearer: bool = False) -> np.ndarray:
+        """Which points lie on the other view: its nearest point within either's local spacing
+        (with ``nearer`` the smaller of the two), times ``scale`` (at most FARTHEST)."""
+        pick = np.minimum if nearer else np.maximum
+        return self.distance <= scale * pick(self.reach, self.other_reach)
 
 
 def fused_cloud(views: list[View]) -> FusedCloud:
@@ -91,20 +103,22 @@ def fused_cloud(views: list[View]) -> FusedCloud:
     between views capped. Costs a k-d tree query per pair of views."""
     views = sorted(views, key=_canonical)
     trees = [cKDTree(view.points) for view in views]
-    reaches = [view.reach for view in views]
+    reaches = [_reach(tree) for tree in trees]
+    pairs = {
+        (i, j): _Pair.of(view, reaches[i], trees[j], reaches[j])
+        for i, view in enumerate(views)
+        for j in range(len(views))
+        if i != j
+    }
     kept = [np.ones(len(view.points), bool) for view in views]
     loose = [view.boundary.copy() for view in views]  # boundary points no other view's inside covers
-    for i, view in enumerate(views):
-        for j, other in enumerate(views):
-            if i == j:
-                continue
-            near, nearest = _near(view, reaches[i], trees[j], reaches[j])
-            inside = near & ~other.boundary[nearest]
-            if j < i:  # a larger view's inside, or one of its points, is already there
-                kept[i] &= ~(inside | _near(view, reaches[i], trees[j], reaches[j], scale=DUPLICATE, nearer=True)[0])
-            loose[i] &= ~inside
-    _bridge(views, trees, reaches, loose)
-    pinholes, centres = _pinholes(views, trees, reaches, loose, kept)
+    for (i, j), pair in pairs.items():
+        inside = pair.near() & ~views[j].boundary[pair.nearest]
+        if j < i:  # a larger view's inside, or one of its points, is already there
+            kept[i] &= ~(inside | pair.near(DUPLICATE, nearer=True))
+        loose[i] &= ~inside
+    _bridge(views, trees, pairs, loose)
+    pinholes, centres = _pinholes(views, pairs, loose, kept)
     points, boundary = [], []
     for view, keep, edge, hole in zip(views, kept, loose, pinholes, strict=True):
         points.append(view.points[keep])
@@ -114,32 +128,32 @@ def fused_cloud(views: list[View]) -> FusedCloud:
     return FusedCloud(cloud, flags, len(centres))
 
 
-def _inward(view: View, points: np.ndarray) -> np.ndarray:
-    """(m, 3) unit directions from each of ``points`` (boundary points of ``view``) into the
-    view: towards the mean of its nearest points."""
-    _, nearest = cKDTree(view.points).query(points, k=min(INWARD_NEIGHBOURS, len(view.points)))
+def _inward(view: View, tree: cKDTree, points: np.ndarray) -> np.ndarray:
+    """(m, 3) unit directions from each of ``points`` (boundary points of ``view``, whose k-d
+    tree is ``tree``) into the view: towards the mean of its nearest points."""
+    _, nearest = tree.query(points, k=min(INWARD_NEIGHBOURS, len(view.points)))
     direction = view.points[nearest].mean(axis=1) - points
     return direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
 
 
-def _bridge(views: list[View], trees: list[cKDTree], reaches: list[np.ndarray], loose: list[np.ndarray]) -> None:
+def _bridge(
+    views: list[View], trees: list[cKDTree], pairs: dict[tuple[int, int], _Pair], loose: list[np.ndarray]
+) -> None:
     """Two views that stop side by side, facing each other across less than a spacing, join
     there (the gap between them is a seam, not a boundary): their loose points that meet a loose
     point of the other view going the other way are no longer loose. Two views that stop at one
     place on the same side (a re-scan) keep that boundary."""
     inward = [np.zeros((len(view.points), 3)) for view in views]
-    for view, edge, direction in zip(views, loose, inward, strict=True):
+    for view, tree, edge, direction in zip(views, trees, loose, inward, strict=True):
         if edge.any():
-            direction[edge] = _inward(view, view.points[edge])
+            direction[edge] = _inward(view, tree, view.points[edge])
     joined = [np.zeros(len(view.points), bool) for view in views]
-    for i, view in enumerate(views):
-        for j in range(len(views)):
-            if i == j or not loose[i].any() or not loose[j].any():
-                continue
-            near, nearest = _near(view, reaches[i], trees[j], reaches[j], scale=BRIDGE)
-            meets = loose[i] & near & loose[j][nearest]
-            facing = np.einsum("ij,ij->i", inward[i][meets], inward[j][nearest[meets]]) < 0
-            joined[i][np.flatnonzero(meets)[facing]] = True
+    for (i, j), pair in pairs.items():
+        if not loose[i].any() or not loose[j].any():
+            continue
+        meets = loose[i] & pair.near(BRIDGE) & loose[j][pair.nearest]
+        facing = np.einsum("ij,ij->i", inward[i][meets], inward[j][pair.nearest[meets]]) < 0
+        joined[i][np.flatnonzero(meets)[facing]] = True
     for edge, join in zip(loose, joined, strict=True):
         edge &= ~join
 
@@ -152,7 +166,7 @@ def _canonical(view: View) -> tuple[float, int, float]:
 
 
 def _pinholes(
-    views: list[View], trees: list[cKDTree], reaches: list[np.ndarray], loose: list[np.ndarray], kept: list[np.ndarray]
+    views: list[View], pairs: dict[tuple[int, int], _Pair], loose: list[np.ndarray], kept: list[np.ndarray]
 ) -> tuple[list[np.ndarray], np.ndarray]:
     """Which loose boundary points lie on a pin-hole between views (a closed loop of at most
     MAX_HOLE_EDGES of the views' boundary edges, each stretch counted once: by the points the
@@ -167,13 +181,11 @@ def _pinholes(
         length = np.linalg.norm(view.points[a[both]] - view.points[b[both]], axis=1)
         np.add.at(lengths, a[both] + offsets[i], kept[i][a[both]] * length / 2)
         np.add.at(lengths, b[both] + offsets[i], kept[i][b[both]] * length / 2)
-        for j in range(len(views)):
-            if i == j or not loose[i].any() or not loose[j].any():
-                continue
-            near, nearest = _near(view, reaches[i], trees[j], reaches[j], scale=2.0)
-            meets = np.flatnonzero(loose[i] & near & loose[j][nearest])
+    for (i, j), pair in pairs.items():  # loose ends of two views that meet
+        if loose[i].any() and loose[j].any():
+            meets = np.flatnonzero(loose[i] & pair.near(MEET) & loose[j][pair.nearest])
             rows.append(meets + offsets[i])
-            cols.append(nearest[meets] + offsets[j])
+            cols.append(pair.nearest[meets] + offsets[j])
     size = offsets[-1]
     graph = sp.coo_matrix((np.ones(sum(map(len, rows))), (np.concatenate(rows), np.concatenate(cols))), (size, size))
     graph = (graph + graph.T).tocsr()
