@@ -28,11 +28,11 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from app.api.unions import _nesting, _worth_telling
 from app.geometry.overlap import measured_fold
 from app.geometry.pipeline import Solved, SpectrumOptions, mesh_spectrum, solve_bytes
 from app.geometry.shapes import Mesh
 from app.inference.models import SpectralModels
+from app.sessions.chain import Located, chained_union, template_fold
 from app.sessions.fused import fused_spectrum, view_of
 from training.data.camera import body_mesh, close_up_camera, orbit_camera, view_mask
 from training.data.regions import RegionSampler
@@ -99,10 +99,7 @@ def errors(models: SpectralModels, views: list[Solved], placed: list, truth: np.
     if len(views) == 1:
         found["chain"] = found["chain told"] = relative_error(values[0], truth)
         return found
-    regions = [part.cover.region for part in placed]
-    overlaps, boundaries = models.template_regions.fold(regions)
-    told, edges = _worth_telling(models, overlaps, boundaries if models.reads_boundary else None)
-    chained = models.union(values, told, edges, _nesting(models, placed, regions))
+    chained = chained_union(models, values, template_fold(models, [Located.placed(part) for part in placed]))
     found["chain"] = relative_error(chained.eigenvalues, truth)
     fold = measured_fold([v.footprint for v in views])
     measured = models.union(values, fold.overlaps, fold.boundaries if models.reads_boundary else None)

@@ -40,7 +40,7 @@ from app.inference.models import (
     checked_overlaps,
     require_overlap_reader,
 )
-from app.inference.nesting import Nesting
+from app.sessions.chain import Located, template_fold
 
 # Where a union's overlaps came from: the client, registered views' footprints, or the parts'
 # places on the template.
@@ -130,12 +130,9 @@ async def union_of_operands(
         covers = None  # some operand's place is unknown: the spectral localizer and no measured overlap
     told_overlaps, told_boundaries, nesting = overlaps, boundaries, None
     if covers is not None and source is None and len(covers) > 1:
-        regions = [cover.region for cover in covers]
-        overlaps, boundaries = models.template_regions.fold(regions)
-        boundaries = boundaries if models.reads_boundary else None
-        source = "correspondence"
-        told_overlaps, told_boundaries = _worth_telling(models, overlaps, boundaries)
-        nesting = _nesting(models, placed, regions)
+        fold = template_fold(models, _located(models, placed, carried or []))
+        overlaps, boundaries, source = fold.overlaps, fold.boundaries, "correspondence"
+        told_overlaps, told_boundaries, nesting = fold.told, fold.told_boundaries, fold.nesting
     reported = overlaps or []
     started = time.perf_counter()
     values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
@@ -164,36 +161,9 @@ async def union_of_operands(
     )
 
 
-def _worth_telling(
-    models: SpectralModels, overlaps: list[float], boundaries: list[float] | None
-) -> tuple[list[float | None] | None, list[float | None] | None]:
-    """The measured shares the union is told: each step's where its measured overlap is below the
-    graph's threshold (None, untold, elsewhere); nothing for models that read no overlap, or when
-    no step qualifies."""
-    below = models.correspondence.tell_below if models.correspondence is not None else 0.0
-    if not models.reads_overlap or not any(share < below for share in overlaps):
-        return None, None
-    told = [share if share < below else None for share in overlaps]
-    edges = (
-        None
-        if boundaries is None
-        else [e if share < below else None for share, e in zip(overlaps, boundaries, strict=True)]
-    )
-    return told, edges
-
-
-def _nesting(models: SpectralModels, placed: list[PlacedPart], regions: list[np.ndarray]) -> Nesting | None:
-    """What the union needs to tell measured steps nested (:mod:`app.inference.nesting`): each
-    operand's place confidence (a carried region's counts as certain) and area; None where the
-    graph never tells a step nested."""
-    below = models.correspondence.nested_below if models.correspondence is not None else 0.0
-    if below <= 0:
-        return None
-    carried = regions[len(placed) :]
-    confidence = [part.placement.mean_confidence for part in placed] + [1.0] * len(carried)
-    area = [float(part.placement.area.sum()) for part in placed]
-    area += [float(models.vertex_area[region].sum()) for region in carried]
-    return Nesting(confidence, area, below)
+def _located(models: SpectralModels, placed: list[PlacedPart], carried: list[Cover]) -> list[Located]:
+    """Every operand's place: the uploads' as placed here, then the carried regions'."""
+    return [Located.placed(part) for part in placed] + [Located.carried(c, models.vertex_area) for c in carried]
 
 
 def _placed(models: SpectralModels, operands: list[Operand]) -> list[PlacedPart]:

@@ -1,0 +1,92 @@
+"""The learned union operator folded over operands placed on the template: each step told the
+overlap read from where the operands lie, where it is worth telling, and told nested where the
+spectra allow it and the places are too doubtful to measure it.
+
+This is the union of spectra whose geometry is not at hand in one frame (the paper's setting:
+spectra with region tokens, or uploads in different frames or poses). ``/v1/union`` and the
+sessions resource both fold through here, and so does ``benchmarks/session_unions.py``, so the
+three mean one thing by "the chain".
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from app.inference.correspondence import PlacedPart
+from app.inference.cover import Cover
+from app.inference.models import SpectralModels, UnionEstimate
+from app.inference.nesting import Nesting
+
+
+@dataclass(frozen=True)
+class Located:
+    """An operand's place on the template: what it covers, the area-weighted mean confidence of
+    its places (1 for a region carried in a token: nothing placed here to doubt) and its own
+    area (m²; a carried region's template area)."""
+
+    cover: Cover
+    confidence: float
+    area: float
+
+    @classmethod
+    def placed(cls, part: PlacedPart) -> "Located":
+        """An upload as the correspondence model placed it."""
+        return cls(part.cover, part.placement.mean_confidence, float(part.placement.area.sum()))
+
+    @classmethod
+    def carried(cls, cover: Cover, vertex_area: np.ndarray) -> "Located":
+        """A region sent in a token beside a spectrum."""
+        return cls(cover, 1.0, float(vertex_area[cover.region].sum()))
+
+
+@dataclass(frozen=True)
+class TemplateFold:
+    """Each union step's overlap and boundary share read on the template, and what the union
+    operator is told of them (None where a step is left untold)."""
+
+    overlaps: list[float]
+    boundaries: list[float] | None
+    told: list[float | None] | None
+    told_boundaries: list[float | None] | None
+    nesting: Nesting | None
+
+
+def template_fold(models: SpectralModels, located: list[Located]) -> TemplateFold:
+    """The steps of a left-to-right fold of ``located`` operands, read from their regions."""
+    regions = [operand.cover.region for operand in located]
+    overlaps, boundaries = models.template_regions.fold(regions)
+    boundaries = boundaries if models.reads_boundary else None
+    told, edges = _worth_telling(models, overlaps, boundaries)
+    confidence = [operand.confidence for operand in located]
+    area = [operand.area for operand in located]
+    return TemplateFold(overlaps, boundaries, told, edges, _nesting(models, confidence, area))
+
+
+def chained_union(models: SpectralModels, values: list[np.ndarray], fold: TemplateFold) -> UnionEstimate:
+    """The operands' spectra folded through the learned operator, told what ``fold`` says."""
+    return models.union(values, fold.told, fold.told_boundaries, fold.nesting)
+
+
+def _worth_telling(
+    models: SpectralModels, overlaps: list[float], boundaries: list[float] | None
+) -> tuple[list[float | None] | None, list[float | None] | None]:
+    """The measured shares the union is told: each step's where its measured overlap is below the
+    graph's threshold (None, untold, elsewhere); nothing for models that read no overlap, or when
+    no step qualifies."""
+    below = models.correspondence.tell_below if models.correspondence is not None else 0.0
+    if not models.reads_overlap or not any(share < below for share in overlaps):
+        return None, None
+    told = [share if share < below else None for share in overlaps]
+    edges = (
+        None
+        if boundaries is None
+        else [e if share < below else None for share, e in zip(overlaps, boundaries, strict=True)]
+    )
+    return told, edges
+
+
+def _nesting(models: SpectralModels, confidence: list[float], area: list[float]) -> Nesting | None:
+    """What the union needs to tell measured steps nested (:mod:`app.inference.nesting`); None
+    where the graph never tells a step nested."""
+    below = models.correspondence.nested_below if models.correspondence is not None else 0.0
+    return Nesting(confidence, area, below) if below > 0 else None
