@@ -5,7 +5,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: run test test-train lint bench dataset train decoder correspondence models
+.PHONY: run test test-train lint bench dataset train decoder correspondence sessions models
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -40,7 +40,10 @@ correspondence: $(BIN)/.train  ## the correspondence model (part → template): 
 	$(BIN)/spectral-unions-train build-parts --preset $(or $(PRESET),standard) --out data/parts-$(or $(PRESET),standard)
 	$(BIN)/spectral-unions-train train-correspondence --parts data/parts-$(or $(PRESET),standard) --runs runs/$(or $(PRESET),standard) --models models --preset $(or $(PRESET),standard)
 
-models: dataset train decoder correspondence  ## everything from scratch: data → training → evaluation → export
+sessions: $(BIN)/.train  ## σ of registered sessions' fused unions: anny people scanned as a front-end does, exact unions
+	$(BIN)/spectral-unions-train calibrate-sessions --models models
+
+models: dataset train decoder correspondence sessions  ## everything from scratch: data → training → evaluation → export
 
 lint: $(BIN)/.installed
 	$(BIN)/ruff check app training tests benchmarks

@@ -14,6 +14,14 @@ view's overlap measured against the union so far, which the union routes are the
         views = [client.spectrum(scan, footprint=True) for scan in scans]
         measured = client.overlap([view.footprint for view in views])
         union = client.union(spectra=[view.eigenvalues for view in views], overlap=measured.overlaps)
+
+A front-end that posts views as it scans keeps a session instead: each view answers the union of
+all the views so far, what they cover and what to scan next:
+
+        session = client.new_session(registered=True)
+        for scan in scans:
+            state = client.add_view(session.id, scan)
+            print(state.union_by, state.eigenvalues[:3], state.least_covered)
 """
 
 import json
@@ -32,6 +40,7 @@ from app.api.routes.models import ModelsResponse
 from app.api.routes.overlap import OverlapResponse
 from app.api.routes.reconstruct import ReconstructResponse
 from app.api.routes.retrieve import RetrieveResponse
+from app.api.routes.sessions import SessionOptions, SessionResponse
 from app.api.routes.shapes import ShapeOut, ShapePage
 from app.api.routes.spectrum import FootprintedReport
 from app.geometry.pipeline import SpectrumReport
@@ -235,6 +244,29 @@ class Client:
     def delete_shape(self, shape_id: str) -> None:
         """Remove a stored shape (needs the API key)."""
         self._answer(self._http.delete(f"/v1/shapes/{shape_id}", headers=self._key_header()))
+
+    def new_session(
+        self, *, registered: bool = False, units: Units = "m", scale: float | None = None
+    ) -> SessionResponse:
+        """Start a scanning session; ``registered``: its views share one frame and pose (a tracked
+        scanner's), so their union is solved once on the views themselves."""
+        options = SessionOptions(registered=registered, units=units, scale=scale)
+        return SessionResponse(**self._answer(self._http.post("/v1/sessions", json=options.model_dump())))
+
+    def add_view(self, session_id: str, scan: Scan, *, boundary: Sequence[int] | None = None) -> SessionResponse:
+        """Add one view to a session: the session answered with it (the union of all its views,
+        coverage, the body parts least covered)."""
+        data = {"boundary": json.dumps(list(boundary))} if boundary is not None else None
+        body = self._post(f"/v1/sessions/{session_id}/views", {}, files=[("file", _part(scan))], data=data)
+        return SessionResponse(**body)
+
+    def session(self, session_id: str) -> SessionResponse:
+        """A session as it stands: its views, their union and coverage."""
+        return SessionResponse(**self._answer(self._http.get(f"/v1/sessions/{session_id}")))
+
+    def end_session(self, session_id: str) -> None:
+        """End a session: it and its views are deleted."""
+        self._answer(self._http.delete(f"/v1/sessions/{session_id}"))
 
     def _operands(
         self,

@@ -27,6 +27,9 @@ UNION_OUTPUTS = ("union", "sigma")  # float32 (batch, k): the union's eigenvalue
 LOCALIZER_INPUTS = ("spectrum",)  # float32 (batch, k)
 LOCALIZER_OUTPUTS = ("probability",)  # float32 (batch, template vertices)
 RECONSTRUCTION_FILE = "reconstruction.onnx"  # optional: served when present (POST /v1/reconstruct)
+# optional: σ of a session's union solved on its fused registered views (app.sessions.calibration);
+# without it registered sessions are not served
+SESSIONS_FILE = "sessions.json"
 # float32 (batch, k) each, 1/m²: a complete body's spectrum and its σ (all 0: a measured spectrum, not a union)
 RECONSTRUCTION_INPUTS = ("spectrum", "sigma")
 RECONSTRUCTION_OUTPUTS = ("vertices",)  # float32 (batch, template vertices, 3): its rest-pose body, metres

@@ -24,6 +24,7 @@ from app.api.routes import (
     overlap,
     reconstruct,
     retrieve,
+    sessions,
     shapes,
     spectrum,
     unions,
@@ -98,6 +99,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(health.router)
     app.include_router(metrics_router)
     app.include_router(spectrum.router, prefix=API_PREFIX)
-    for routes in (unions, overlap, localize, correspondence, reconstruct, models, retrieve, shapes):
+    for routes in (unions, overlap, localize, correspondence, reconstruct, models, retrieve, shapes, sessions):
         app.include_router(routes.router, prefix=API_PREFIX)
     return app

@@ -192,6 +192,22 @@ def train_correspondence_command(
     typer.echo(json.dumps(metrics["pairs"], indent=1))
 
 
+@cli.command("calibrate-sessions")
+def calibrate_sessions_command(
+    models: ModelsOption = Path("models"),
+    people: Annotated[int, typer.Option(help="Calibration people (scanned as a front-end does).")] = 8,
+    held_out: Annotated[int, typer.Option(help="Held-out people the coverage is scored on.")] = 4,
+    seed: Annotated[int, typer.Option(help="Calibration people's seed; held-out people use seed + 1.")] = 1,
+) -> None:
+    """σ of a registered session's fused union, by view count, from anny sessions with exact truth."""
+    import json
+
+    from training.sessions.calibrate import calibrate_sessions
+
+    content = calibrate_sessions(models, people, held_out, seed)
+    typer.echo(json.dumps(content["bands"], indent=1))
+
+
 def _pipeline(verb: str, data: Path, runs: Path, models: Path, preset: str, seed: int) -> None:
     from training.learning.pipeline import TRAINING_PRESETS, UnfinishedRuns, run_pipeline
 

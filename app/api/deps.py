@@ -13,6 +13,7 @@ from app.api.problems import ProblemError
 from app.core.config import Settings
 from app.inference.models import SpectralModels
 from app.retrieval.store import ShapeStore
+from app.sessions.store import SessionStore
 
 # The one form field a client may repeat: one uploaded scan per ``files`` part.
 REPEATABLE_FIELDS = frozenset({"files"})
@@ -40,6 +41,14 @@ async def usable_store(request: Request) -> ShapeStore:
 
 
 StoreDep = Annotated[ShapeStore, Depends(usable_store)]
+
+
+async def usable_sessions(request: Request) -> SessionStore:
+    """The scanning sessions' store; 503 database-unavailable while the database is down."""
+    return await request.app.state.resources.require_sessions()
+
+
+SessionsDep = Annotated[SessionStore, Depends(usable_sessions)]
 # The union routes' overlap, boundary and measure_overlap query parameters, as one.
 ToldDep = Annotated[Told, Depends(told_query)]
 

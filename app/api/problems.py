@@ -54,7 +54,10 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
     400: [("invalid-form", "Invalid form data", "Too many files. Maximum number of files is 32.")],
     401: [("invalid-api-key", "Invalid API key", "X-API-Key is missing or wrong")],
     403: [("writes-disabled", "Writes disabled", "no API key is configured on this server")],
-    404: [("shape-not-found", "Shape not found", "no shape with id 3f2a9c")],
+    404: [
+        ("shape-not-found", "Shape not found", "no shape with id 3f2a9c"),
+        ("session-not-found", "Session not found", "no session '5d1c…': never made, ended or expired"),
+    ],
     408: [
         (
             "body-timeout",
@@ -62,6 +65,7 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
             "the request body was not complete 60 s after its headers (12288 bytes received)",
         )
     ],
+    409: [("session-full", "Session full", "the session holds 32 views, as many as this service keeps")],
     413: [("upload-too-large", "Upload too large", "the request body exceeds the cap of 67108864 bytes")],
     415: [
         (
@@ -96,6 +100,7 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
     501: [
         ("reconstruction-unavailable", "Reconstruction unavailable", "these models have no shape decoder"),
         ("correspondence-unavailable", "Correspondence unavailable", "these models have no correspondence model"),
+        ("sessions-unavailable", "Registered sessions unavailable", "these models have no sessions.json"),
     ],
     503: [
         (
@@ -110,7 +115,7 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
             "Overloaded",
             "18 solves (6291456 bytes of their uploads) are already being received or run; retry after 1 s.",
         ),
-        ("solver-crashed", "Solver crashed", "the solver process stopped while solving this shape (…); retry."),
+        ("solver-crashed", "Solver crashed", "the solver process stopped during the solve (…); retry."),
         ("upload-storage-full", "Upload storage full", "the server has no temporary space left to receive this upload"),
     ],
 }

@@ -14,6 +14,7 @@ from app.core.config import Settings
 from app.inference.models import SpectralModels
 from app.retrieval.seed import open_store
 from app.retrieval.store import ShapeStore, StoreUnavailable
+from app.sessions.store import SessionStore, open_sessions
 
 
 class Resources:
@@ -23,6 +24,7 @@ class Resources:
         self.models_problem = "not loaded yet"
         self._store: ShapeStore | None = None
         self.store_problem = "not opened yet"
+        self._sessions: SessionStore | None = None
 
     def open(self) -> None:
         """Open both at start-up; failures are recorded, not raised."""
@@ -43,15 +45,19 @@ class Resources:
             self.models, self.models_problem = None, f"{type(exc).__name__}: {exc}"
 
     def _open_store(self) -> None:
+        """The shape store and the sessions, in one database: both open, or neither is usable."""
+        settings = self.settings
         try:
-            self._store = open_store(self.settings.database_path, self.settings.database_url, self.settings.models_dir)
+            self._store = open_store(settings.database_path, settings.database_url, settings.models_dir)
+            self._sessions = open_sessions(settings.database_path, settings.database_url, settings.session_ttl_seconds)
         except StoreUnavailable as exc:
-            self._store, self.store_problem = None, str(exc)
+            self._store, self._sessions, self.store_problem = None, None, str(exc)
 
     def close(self) -> None:
         """Release what the store holds open (PostgreSQL's idle connections)."""
-        if self._store is not None:
-            self._store.close()
+        for store in (self._store, self._sessions):
+            if store is not None:
+                store.close()
 
     def require_models(self) -> SpectralModels:
         if self.models is None:
@@ -65,6 +71,13 @@ class Resources:
         if self._store is None:
             raise StoreUnavailable(self.store_problem)  # answered as 503 database-unavailable
         return self._store
+
+    async def require_sessions(self) -> SessionStore:
+        """The scanning sessions' store (the shape store's database), opened again if it was down."""
+        await self.require_store()
+        if self._sessions is None:  # opened with the shape store, or neither was
+            raise StoreUnavailable(self.store_problem)
+        return self._sessions
 
     def summary(self) -> str:
         """One line for the start-up log: what is served, or why it is not."""

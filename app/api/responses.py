@@ -25,6 +25,11 @@ class UnionResponse(BaseModel):
     lower: list[float] = Field(description="Lower end of the 90 % interval.")
     upper: list[float] = Field(description="Upper end of the 90 % interval.")
     operands: list[OperandSpectrum] = Field(description="Each operand's own spectrum, for caching.")
+    union_by: Literal["operand", "learned-chain"] = Field(
+        description="What made the union: operand (one operand, returned as is, σ 0) or learned-chain (the learned "
+        "operator folded over the operands' spectra, left to right). A scanning session of registered views is "
+        "solved on the views themselves instead: /v1/sessions."
+    )
     model_version: str = MODEL_VERSION_FIELD
     solve_ms: float = Field(description="Eigen-solves of the uploaded files.")
     inference_ms: float = Field(description="The union operator's time.")

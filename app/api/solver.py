@@ -23,8 +23,10 @@ import gc
 import multiprocessing
 import os
 import resource
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import anyio
 import numpy as np
@@ -37,9 +39,10 @@ from app.api.problems import ProblemError
 from app.core.errors import InputError
 from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport, solve_bytes
 from app.inference.correspondence import places_in_worker
+from app.sessions.fused import View, fused_spectrum
 
 RETRY_AFTER_SECONDS = 1  # a solve takes ~0.1–0.3 s: a place frees within a second
-_PRELOADED = ["app.geometry.pipeline", "app.inference.correspondence"]  # onnxruntime for placing
+_PRELOADED = ["app.geometry.pipeline", "app.inference.correspondence", "app.sessions.fused"]
 _CONTEXT = multiprocessing.get_context("forkserver")
 
 
@@ -99,6 +102,18 @@ def _solve_task(
     gc.collect()
     _return_freed_heap()
     raise SolveMemoryExceeded("the solve needed more memory than a solver worker may use")
+
+
+def _fuse_task(views: list[View], k: int) -> np.ndarray:
+    """The worker's task for a registered session: its views fused and solved once
+    (:func:`app.sessions.fused.fused_spectrum`), a memory failure answered as a solve's is."""
+    try:
+        return fused_spectrum(views, k)
+    except MemoryError:
+        pass
+    gc.collect()
+    _return_freed_heap()
+    raise SolveMemoryExceeded("the session's fused views needed more memory than a solver worker may use")
 
 
 def _return_freed_heap() -> None:
@@ -182,18 +197,28 @@ class SolverPool:
         async with self.limiter:
             graph = str(place_with) if place_with is not None else None
             task = (data, file_type, options, vectors, footprint, graph, relaxed)
-            future = self._pool.schedule(_solve_task, args=task, timeout=self.timeout_s)
-            try:
-                solved: Solved = await asyncio.wrap_future(future)
-            except TimeoutError as exc:
-                raise SolveTimeout(f"the solve did not finish within {self.timeout_s:g} s") from exc
-            except ProcessExpired as exc:
-                raise ProblemError(
-                    503,
-                    "solver-crashed",
-                    "Solver crashed",
-                    f"the solver process stopped while solving this shape ({exc}); retry.",
-                    headers={"Retry-After": str(RETRY_AFTER_SECONDS)},
-                ) from exc
+            solved: Solved = await self._run(_solve_task, task, "the solve")
         SOLVES.observe((solved.report.assembly_ms + solved.report.solve_ms) / 1e3)
         return solved
+
+    async def fuse(self, views: list[View], k: int) -> np.ndarray:
+        """The first ``k`` eigenvalues of registered views' union, solved in a worker under the
+        same deadline and memory cap as an upload (:func:`_fuse_task`)."""
+        async with self.limiter:
+            return await self._run(_fuse_task, (views, k), "the solve of the session's fused views")
+
+    async def _run(self, task: Callable, args: tuple, what: str) -> Any:
+        """A task on the pool, its deadline and a dead worker answered as problems."""
+        future = self._pool.schedule(task, args=args, timeout=self.timeout_s)
+        try:
+            return await asyncio.wrap_future(future)
+        except TimeoutError as exc:
+            raise SolveTimeout(f"{what} did not finish within {self.timeout_s:g} s") from exc
+        except ProcessExpired as exc:
+            raise ProblemError(
+                503,
+                "solver-crashed",
+                "Solver crashed",
+                f"the solver process stopped during {what} ({exc}); retry.",
+                headers={"Retry-After": str(RETRY_AFTER_SECONDS)},
+            ) from exc

@@ -72,6 +72,7 @@ class UnionOutcome:
             "lower": self.result.lower.tolist(),
             "upper": self.result.upper.tolist(),
             "operands": [{"source": o.source, "eigenvalues": o.eigenvalues} for o in self.operands],
+            "union_by": "operand" if len(self.operands) == 1 else "learned-chain",
             "model_version": models.version,
             "solve_ms": round(self.solve_ms, 2),
             "inference_ms": round(self.inference_ms, 2),

@@ -72,6 +72,16 @@ class Settings(BaseSettings):
     solves_per_worker: int = Field(
         500, ge=0, description="Solves after which a solver worker is replaced by a fresh one (0: never)."
     )
+    session_max_views: int = Field(
+        32,
+        gt=0,
+        description="Views a scanning session keeps; a view beyond is refused (409 session-full), the session kept.",
+    )
+    session_ttl_seconds: float = Field(
+        24 * 3600.0,
+        gt=0,
+        description="A scanning session untouched (no view added) for this long is gone: 404, its views deleted.",
+    )
     shutdown_grace_seconds: float = Field(
         30.0, gt=0, description="On SIGTERM, how long in-flight requests may take to finish before they are cancelled."
     )

@@ -29,6 +29,7 @@ from scipy.spatial import cKDTree
 
 from app.contract import MAX_HOLE_EDGES
 from app.geometry.pipeline import SpectrumOptions, cloud_spectrum
+from app.geometry.placing import Part
 from app.geometry.shapes import PointCloud
 from app.geometry.topology import boundary_half_edges
 
@@ -239,6 +240,12 @@ def view_of(points: np.ndarray, mass: np.ndarray, boundary: np.ndarray, faces: n
         else:
             edges = np.empty((0, 2), np.int64)
     return View(np.asarray(points, np.float64), np.asarray(mass, np.float64), np.asarray(boundary, bool), edges)
+
+
+def view_of_part(part: Part) -> View:
+    """An upload solved for placing (its part: the vertices, areas and boundary the spectrum was
+    solved with) as a view."""
+    return view_of(part.points, part.mass, part.boundary, part.faces)
 
 
 def fused_spectrum(views: list[View], k: int) -> np.ndarray:

@@ -143,3 +143,19 @@ def test_scans_placed_once_are_united_as_spectra_with_their_regions(service, sca
     np.testing.assert_allclose(
         service.union(spectra=spectra, regions=regions).eigenvalues, by_files.eigenvalues, rtol=1e-6
     )
+
+
+def test_a_session_filled_view_by_view_answers_as_the_union_of_its_views(service, scans):
+    """The client's sessions: views added one by one to a session answer what one union of
+    all of them answers, as the session reads back, until the session is ended."""
+    session = service.new_session()
+    assert session.union_by == "empty" and not session.views
+    for scan in scans:
+        state = service.add_view(session.id, scan)
+    assert state.union_by == "learned-chain" and [view.source for view in state.views] == [s[0] for s in scans]
+    np.testing.assert_allclose(state.eigenvalues, service.union(files=scans).eigenvalues, rtol=1e-9)
+    assert service.session(session.id).eigenvalues == state.eigenvalues
+    service.end_session(session.id)
+    with pytest.raises(ServiceProblem) as raised:
+        service.session(session.id)
+    assert raised.value.status == 404 and raised.value.type == "/problems/session-not-found"

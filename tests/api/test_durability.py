@@ -1,4 +1,5 @@
-"""An acknowledged write survives ``kill -9`` of the server right after the response, on both engines."""
+"""An acknowledged write (a stored shape, a session's view) survives ``kill -9`` of the server right
+after the response, on both engines."""
 
 import contextlib
 import signal
@@ -10,6 +11,9 @@ import numpy as np
 import psycopg
 import pytest
 
+from app.core.config import Settings
+from app.inference.template import PART_NAMES, Template
+from app.samples import SESSION_SCANS, template_part
 from tests.api.conftest import API_KEY
 from tests.api.servers import start, wait_ready
 from tests.api.test_shapes_api import body_ply
@@ -144,3 +148,46 @@ def test_a_kill_mid_burst_leaves_whole_rows_only_and_no_spooled_file(database, t
     for shape in burst:  # and whatever is there is whole
         spectrum = np.asarray(shape["spectrum"])
         assert spectrum.shape == (20,) and np.all(np.isfinite(spectrum)) and np.all(np.diff(spectrum) >= 0)
+
+
+def test_views_posted_at_once_to_a_session_all_land_and_survive_a_kill_9(database):
+    """A front-end's views posted together: each one answered 201 is in the session after the
+    server is killed mid-burst and started again, once, whatever the others did."""
+    template = Template.load(Settings().models_dir)
+    scans = [template_part(template, tuple(p for p in PART_NAMES if p not in kept)) for kept in SESSION_SCANS.values()]
+    process, base = served(database)
+    acknowledged: list[str] = []
+    errors: list[BaseException] = []
+    session = httpx.post(f"{base}/v1/sessions", timeout=30).json()["id"]
+
+    def add(index: int) -> None:
+        files = {"file": (f"view-{index}.ply", scans[index % len(scans)], "application/octet-stream")}
+        with contextlib.suppress(httpx.HTTPError):  # the kill cuts connections: expected, nothing else is
+            response = httpx.post(f"{base}/v1/sessions/{session}/views", files=files, timeout=60)
+            if response.status_code == 201:
+                acknowledged.append(f"view-{index}.ply")
+
+    clients = [_recorded(errors, add, index) for index in range(BURST)]
+    try:
+        for client in clients:
+            client.start()
+        deadline = time.monotonic() + 60
+        while len(acknowledged) < BURST // 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        process.send_signal(signal.SIGKILL)  # some views acknowledged, others mid-solve
+        process.wait(timeout=10)
+    finally:
+        process.kill()
+        for client in clients:
+            client.join(timeout=30)
+    assert not errors, errors
+    assert len(acknowledged) >= BURST // 2
+    process, base = served(database)
+    try:
+        stored = httpx.get(f"{base}/v1/sessions/{session}", timeout=60).json()
+    finally:
+        process.terminate()
+        process.wait(timeout=20)
+    sources = [view["source"] for view in stored["views"]]
+    assert set(acknowledged) <= set(sources) and len(sources) == len(set(sources))
+    assert [view["index"] for view in stored["views"]] == list(range(len(sources)))

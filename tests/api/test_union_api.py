@@ -58,7 +58,7 @@ def test_union_is_commutative_monotone_and_inside_its_interval(client, parts):
         assert ab.json()[key] == ba.json()[key]
     body = ab.json()
     values = np.array(body["eigenvalues"])
-    assert len(values) == 20 and len(body["operands"]) == 2
+    assert len(values) == 20 and len(body["operands"]) == 2 and body["union_by"] == "learned-chain"
     assert np.all(np.diff(values) >= 0) and np.all(values >= 0)
     assert np.all(np.array(body["lower"]) <= values) and np.all(values <= np.array(body["upper"]))
 
@@ -74,7 +74,7 @@ def test_three_operands_fold_left_to_right(client, parts):
 def test_one_operand_is_returned_as_is(client, parts):
     body = union(client, [parts[0]]).json()
     np.testing.assert_allclose(body["eigenvalues"], parts[0], rtol=1e-6)
-    assert body["sigma"] == [0.0] * 20
+    assert body["sigma"] == [0.0] * 20 and body["union_by"] == "operand"
 
 
 def test_a_file_operand_is_solved_server_side(client, template, parts):

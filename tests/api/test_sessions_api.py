@@ -1,0 +1,170 @@
+"""``/v1/sessions``: a session filled one view at a time answers the union of all its views (the
+exact union's spectrum for registered views, the learned chain's for the others), its coverage
+and what to scan next; a bad view, a full or a missing session are clear problems that leave the
+session as it was."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from app.core.config import Settings
+from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
+from app.inference.template import PART_NAMES, Template
+from app.main import create_app
+from app.samples import SESSION_SCANS, template_part
+from tests.api.conftest import settings_for
+from tests.api.test_union_api import PROBLEM, region
+
+HEAD_SIDE, LEG_SIDE = SESSION_SCANS  # head, torso and left arm; torso, hips and right leg
+ALSO_LEFT_LEG = ("torso", "hips", "left_thigh", "left_shin", "left_foot")
+MAX_VIEWS = 3
+
+
+def removed(kept: tuple[str, ...]) -> tuple[str, ...]:
+    return tuple(part for part in PART_NAMES if part not in kept)
+
+
+@pytest.fixture(scope="module")
+def template() -> Template:
+    return Template.load(Settings().models_dir)
+
+
+@pytest.fixture(scope="module")
+def scans(template) -> dict[str, bytes]:
+    """Three views of the template body in its own frame, each the body without some parts."""
+    found = {name: template_part(template, removed(kept)) for name, kept in SESSION_SCANS.items()}
+    found["torso_hips_left_leg.ply"] = template_part(template, removed(ALSO_LEFT_LEG))
+    return found
+
+
+@pytest.fixture(scope="module")
+def client(tmp_path_factory):
+    database = tmp_path_factory.mktemp("db") / "sessions.sqlite"
+    settings = settings_for(database).model_copy(update={"session_max_views": MAX_VIEWS})
+    with TestClient(create_app(settings)) as test_client:
+        yield test_client
+
+
+def new_session(client, **options) -> dict:
+    made = client.post("/v1/sessions", json=options or None)
+    assert made.status_code == 201, made.text
+    assert made.headers["location"] == f"/v1/sessions/{made.json()['id']}"
+    return made.json()
+
+
+def add(client, session: str, name: str, data: bytes):
+    return client.post(f"/v1/sessions/{session}/views", files={"file": (name, data)})
+
+
+def truth(template: Template, *kept: tuple[str, ...]) -> np.ndarray:
+    """The spectrum of the template region the views cover together."""
+    together = set().union(*kept)
+    return np.asarray(mesh_spectrum(region(template, removed(tuple(together))), SpectrumOptions(k=20)).eigenvalues)
+
+
+def test_a_new_session_is_empty_and_says_what_to_scan(client):
+    session = new_session(client)
+    assert session["views"] == [] and session["union_by"] == "empty" and session["eigenvalues"] == []
+    assert session["area_fraction"] == 0.0 and set(session["part_coverage"]) == set(PART_NAMES)
+    assert len(session["least_covered"]) == 3 and not session["registered"] and session["scale"] == 1.0
+
+
+def test_one_view_is_its_own_union(client, scans):
+    session = new_session(client)["id"]
+    answer = add(client, session, HEAD_SIDE, scans[HEAD_SIDE])
+    assert answer.status_code == 201, answer.text
+    body = answer.json()
+    assert body["union_by"] == "view" and body["sigma"] == [0.0] * 20
+    assert body["eigenvalues"] == body["views"][0]["eigenvalues"]
+    assert body["part_coverage"]["head"] > 0.8 and body["part_coverage"]["right_foot"] < 0.1
+    assert "head" not in body["least_covered"]
+
+
+def test_registered_views_are_fused_into_the_exact_union_in_any_order(client, template, scans):
+    answers = []
+    for order in ((HEAD_SIDE, LEG_SIDE), (LEG_SIDE, HEAD_SIDE)):
+        session = new_session(client, registered=True)["id"]
+        for name in order:
+            answer = add(client, session, name, scans[name])
+            assert answer.status_code == 201, answer.text
+        answers.append(answer.json())
+    first, second = answers
+    assert first["union_by"] == "fused" and first["registered"]
+    np.testing.assert_array_equal(first["eigenvalues"], second["eigenvalues"])  # any order: one union
+    exact = truth(template, *SESSION_SCANS.values())
+    assert np.mean(np.abs(np.array(first["eigenvalues"]) - exact) / exact) < 0.05
+    sigma = np.array(first["sigma"])
+    assert np.all(sigma > 0) and np.all(np.array(first["lower"]) <= first["eigenvalues"])
+    covered = first["part_coverage"]
+    assert covered["torso"] > 0.8 and covered["right_thigh"] > 0.8 and covered["left_thigh"] < 0.1
+    assert "right_foot" not in first["least_covered"]
+
+
+def test_unregistered_views_fold_as_the_union_route_folds_them(client, scans):
+    session = new_session(client)["id"]
+    for name in (HEAD_SIDE, LEG_SIDE):
+        answer = add(client, session, name, scans[name])
+    body = answer.json()
+    files = [("files", (name, scans[name])) for name in (HEAD_SIDE, LEG_SIDE)]
+    union = client.post("/v1/union", files=files).json()
+    assert body["union_by"] == "learned-chain"
+    np.testing.assert_allclose(body["eigenvalues"], union["eigenvalues"], rtol=1e-9)
+    np.testing.assert_allclose(body["sigma"], union["sigma"], rtol=1e-9)
+    assert body["overlaps"] == pytest.approx(union["overlaps"]) and body["overlaps_told"] == union["overlaps_told"]
+    read = client.get(f"/v1/sessions/{session}").json()
+    assert read["eigenvalues"] == body["eigenvalues"] and [v["source"] for v in read["views"]] == [HEAD_SIDE, LEG_SIDE]
+
+
+def test_a_bad_view_is_a_problem_and_leaves_the_session_as_it_was(client, scans):
+    session = new_session(client)["id"]
+    before = add(client, session, HEAD_SIDE, scans[HEAD_SIDE]).json()
+    for name, data in (("broken.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n"), ("x.zip", b"PK")):
+        refused = add(client, session, name, data)
+        assert 400 <= refused.status_code < 500 and refused.headers["content-type"].startswith(PROBLEM)
+    after = client.get(f"/v1/sessions/{session}").json()
+    assert after["views"] == before["views"] and after["eigenvalues"] == before["eigenvalues"]
+
+
+def test_a_full_session_refuses_another_view(client, scans):
+    session = new_session(client)["id"]
+    for name in list(scans)[:MAX_VIEWS]:
+        assert add(client, session, name, scans[name]).status_code == 201
+    refused = add(client, session, HEAD_SIDE, scans[HEAD_SIDE])
+    assert refused.status_code == 409 and refused.json()["type"] == "/problems/session-full"
+    assert len(client.get(f"/v1/sessions/{session}").json()["views"]) == MAX_VIEWS
+
+
+def test_a_missing_or_ended_session_is_404(client, scans):
+    session = new_session(client)["id"]
+    assert client.delete(f"/v1/sessions/{session}").status_code == 204
+    for response in (
+        client.get(f"/v1/sessions/{session}"),
+        client.delete(f"/v1/sessions/{session}"),
+        add(client, session, HEAD_SIDE, scans[HEAD_SIDE]),
+        client.get("/v1/sessions/never-made"),
+    ):
+        assert response.status_code == 404 and response.json()["type"] == "/problems/session-not-found"
+
+
+@pytest.mark.parametrize(
+    "body", ['{"registered": "perhaps"}', '{"units": "furlong"}', '{"scale": -1}', '{"colour": 1}', "{not json"]
+)
+def test_malformed_options_are_422_problems(client, body):
+    response = client.post("/v1/sessions", content=body, headers={"content-type": "application/json"})
+    assert response.status_code == 422 and response.headers["content-type"].startswith(PROBLEM)
+
+
+def test_units_apply_to_every_view(client, template, scans):
+    session = new_session(client, units="mm")["id"]
+    millimetres = template_part_in_mm(template)
+    body = add(client, session, "head_side_mm.ply", millimetres).json()
+    metres = add(client, new_session(client)["id"], HEAD_SIDE, scans[HEAD_SIDE]).json()
+    assert body["scale"] == 0.001
+    np.testing.assert_allclose(body["eigenvalues"], metres["eigenvalues"], rtol=1e-4)
+
+
+def template_part_in_mm(template: Template) -> bytes:
+    scaled = replace(template, vertices=template.vertices * 1000)
+    return template_part(scaled, removed(SESSION_SCANS[HEAD_SIDE]))
