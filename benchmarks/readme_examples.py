@@ -102,6 +102,8 @@ def cut_tokens(body: dict) -> dict:
             cut[key] = cut[key][:length]
     if isinstance(cut.get("vertices"), list) and cut["vertices"]:
         cut["vertices"] = cut["vertices"][: 5 if isinstance(cut["vertices"][0], int) else 3]
+    if isinstance(cut.get("views"), list):  # a session's views, each with its region token
+        cut["views"] = [{**view, "region_token": view["region_token"][:TOKEN_SHOWN] + "…"} for view in cut["views"]]
     if isinstance(cut.get("region"), dict):
         region = cut["region"]
         cut["region"] = {**region, "vertices": region["vertices"][:5], "token": region["token"][:TOKEN_SHOWN] + "…"}
@@ -125,6 +127,8 @@ def examples(overlap: float) -> list[Example]:
     footprint = f"'{URL}/v1/spectrum?footprint=true'"
     header = "sed '/end_header/q'"  # a PLY's text header, up to its end
     status = "-o /dev/null -w '%{http_code}\\n'"
+    view_route = f"{URL}/v1/sessions/$(jq -r .id session.json)/views"
+    session_fields = ("union_by", "eigenvalues", "sigma", "area_fraction", "part_coverage", "least_covered", "warnings")
     return [
         Example(f"curl -s -F file=@no_head_neck.ply '{URL}/v1/spectrum?units=m'", record="spectrum", tour=True),
         Example(f"curl -s {both} {URL}/v1/union", record="union", tour=True),
@@ -147,6 +151,23 @@ def examples(overlap: float) -> list[Example]:
         Example(f"curl -s {key} -F label=alice -F file=@body.ply {URL}/v1/shapes | tee alice.json", record="add_shape"),
         Example(f"curl -s '{URL}/v1/shapes?offset=0&limit=2'", first_of_list, "list_shapes"),
         Example(f"curl -s {status} -X DELETE {key} {URL}/v1/shapes/$(jq -r .id alice.json)", as_text),
+        Example(
+            f"curl -s -H 'content-type: application/json' -d '{{\"registered\": true}}' {URL}/v1/sessions"
+            " | tee session.json",
+            fields("id", "registered", "union_by", "least_covered"),
+            "session",
+            True,
+        ),
+        Example(
+            f"curl -s -F file=@head_torso_left_arm.ply {view_route}",
+            fields("union_by", "eigenvalues", "sigma", "area_fraction", "least_covered"),
+            tour=True,
+        ),
+        Example(
+            f"curl -s -F file=@torso_hips_right_leg.ply {view_route}", fields(*session_fields), "session_view", True
+        ),
+        Example(f"curl -s {URL}/v1/sessions/$(jq -r .id session.json)", fields("union_by", "views", "eigenvalues")),
+        Example(f"curl -s {status} -X DELETE {URL}/v1/sessions/$(jq -r .id session.json)", as_text),
         Example(f"curl -s {URL}/v1/models", record="models"),
         Example(f"curl -s {URL}/healthz"),
         Example(f"curl -s {URL}/readyz"),

@@ -237,66 +237,26 @@ def test_a_part_in_the_wrong_units_is_warned_of_and_can_be_removed(base, scans, 
     assert browser.find_element(By.ID, "status").text == "No scan yet."
 
 
-def test_a_registered_session_measures_each_scan_s_overlap_and_tells_the_union(base, scans, browser):
+def test_a_registered_session_shows_the_union_the_service_s_session_solves(base, scans, browser):
     """With "registered scans" (the two parts are views of the template in one frame): the page
-    shows the overlap and boundary share /v1/overlap measures from the API's own footprint tokens,
-    and the coverage it shows is that of the union told them, not the untold one."""
+    adds them to a session of the service, and the coverage it shows is that of the session's
+    union, where the scans lie (the right leg, not its mirror image)."""
     _drop_one_at_a_time(browser, base, scans, registered=True)
     assert browser.find_element(By.ID, "registered").get_attribute("disabled") is not None
+    assert browser.find_element(By.TAG_NAME, "body").get_attribute("data-union-by") == "fused"
 
-    views = [
-        httpx.post(
-            f"{base}/v1/spectrum", params={"footprint": "true"}, files={"file": (p.name, p.read_bytes())}, timeout=60
-        ).json()
-        for p in scans
-    ]
-    tokens = json.dumps([view["footprint"] for view in views])
-    measured = httpx.post(f"{base}/v1/overlap", data={"footprints": tokens}, timeout=60).json()
-    (share,), (boundary,) = measured["overlaps"], measured["boundaries"]
-    second = browser.find_elements(By.CSS_SELECTOR, "#parts li")[1]
-    assert second.get_attribute("data-overlap") == f"{share:.4f}"
-    assert second.get_attribute("data-boundary") == f"{boundary:.4f}"
-    spectra = json.dumps([view["eigenvalues"] for view in views])
-    params = {"overlap": share, "boundary": boundary}
-    told = httpx.post(f"{base}/v1/localize", params=params, data={"spectra": spectra}, timeout=60).json()
-    untold = _expected_region(base, scans)
+    session = httpx.post(f"{base}/v1/sessions", json={"registered": True}, timeout=60).json()
+    for path in scans:
+        files = {"file": (path.name, path.read_bytes())}
+        state = httpx.post(f"{base}/v1/sessions/{session['id']}/views", files=files, timeout=60).json()
+    form = {"spectra": json.dumps([state["eigenvalues"]]), "regions": json.dumps([state["region_token"]])}
+    expected = httpx.post(f"{base}/v1/localize", data=form, timeout=60).json()
     shown = {
         item.get_attribute("data-part"): float(item.get_attribute("data-coverage"))
         for item in browser.find_elements(By.CSS_SELECTOR, "#coverage li")
     }
-    assert shown == pytest.approx(told["part_coverage"], abs=1e-4)
-    assert told["part_coverage"] != pytest.approx(untold["part_coverage"], abs=1e-3)  # told it, the answer moved
-
-
-# Before the page's own script: /v1/models answers that the union reads the overlap alone (as
-# a model set without the boundary share does), and every URL fetched is kept.
-_MODELS_WITHOUT_BOUNDARY = """
-window.fetchedUrls = [];
-const served = window.fetch.bind(window);
-window.fetch = async (url, options) => {
-  window.fetchedUrls.push(String(url));
-  const response = await served(url, options);
-  if (String(url) !== "/v1/models") return response;
-  const models = await response.json();
-  models.told = models.told.filter((name) => name !== "boundary");
-  return new Response(JSON.stringify(models), { status: 200, headers: { "content-type": "application/json" } });
-};
-"""
-
-
-def test_a_registered_session_tells_the_union_only_what_the_models_read(base, scans, browser):
-    """A model set that cannot be told the boundary share answers 422 to one: the page reads
-    /v1/models' "told" and sends the overlap alone."""
-    injected = browser.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": _MODELS_WITHOUT_BOUNDARY})
-    try:
-        _drop_one_at_a_time(browser, base, scans, registered=True)
-        urls = browser.execute_script("return window.fetchedUrls")
-    finally:
-        browser.execute_cdp_cmd("Page.removeScriptToEvaluateOnNewDocument", {"identifier": injected["identifier"]})
-    unions = [url for url in urls if url.startswith(("/v1/localize", "/v1/retrieve", "/v1/reconstruct"))]
-    told = [url for url in unions if "overlap=" in url]
-    assert len(told) == 4, unions  # the second scan's four union requests, told its overlap
-    assert not any("boundary=" in url for url in unions), unions
+    assert shown == pytest.approx(expected["part_coverage"], abs=1e-4)
+    assert shown["right_thigh"] > 0.8 > 0.2 > shown["left_thigh"]
 
 
 @pytest.fixture(scope="module")

@@ -1,17 +1,19 @@
-// The scanning-session page: each dropped scan is solved once by POST /v1/spectrum; after
-// that only spectra are sent. After every scan the page asks /v1/localize (JSON and the
-// coloured template as PLY), /v1/retrieve and /v1/reconstruct (the rebuilt body as PLY, its
-// height and spectrum check in headers) for the union of all parts so far. With "registered
-// scans" (one scanner's views: one frame, one pose) each scan's footprint token comes back
-// with its spectrum, POST /v1/overlap measures the new scan against the union so far's token,
-// and every union is told those overlaps and boundary shares. With "whole-body scans" each scan's holes are capped
-// before its solve (cap_holes=true): a whole body scanned standing is solved as the closed body.
+// The scanning-session page: each dropped scan is solved once, by POST /v1/correspondence (its
+// spectrum and where it lies on the template); after that only spectra and region tokens are
+// sent. After every scan the page asks /v1/localize (JSON and the coloured template as PLY),
+// /v1/retrieve and /v1/reconstruct (the rebuilt body as PLY, its height and spectrum check in
+// headers) for the union of all parts so far. With "registered scans" (one scanner's views: one
+// frame, one pose) the scans go to a scanning session of the service (POST /v1/sessions, then
+// POST /v1/sessions/{id}/views), which solves their union once on the views themselves; the
+// union routes are then asked about that union (its spectrum with its region token). With
+// "whole-body scans" each scan's holes are capped before its solve (cap_holes=true): a whole
+// body scanned standing is solved as the closed body.
 import * as THREE from "three";
 import { OrbitControls } from "/static/vendor/three/OrbitControls.js";
 import { PLYLoader } from "/static/vendor/three/PLYLoader.js";
 
-const parts = []; // {name, eigenvalues, warnings, overlap, boundary (registered scans after the first), footprint, region}
-let unionFootprint = null; // registered scans: the footprint token of the union so far
+const parts = []; // {name, eigenvalues, warnings, region, file}
+let session = null; // registered scans: the service's session they were added to, as it last answered
 const $ = (id) => document.getElementById(id);
 const SVG = "http://www.w3.org/2000/svg";
 const RETRIEVED = 25; // shapes asked of /v1/retrieve, grouped by person
@@ -23,46 +25,20 @@ function setStatus(text, problem = false) {
   $("status").classList.toggle("problem", problem);
 }
 
-// Every part's spectrum, and where each lies on the template when every part was placed there
-// (its region token from /v1/correspondence): the union is then localized, and each step's
-// overlap measured, on the template.
+// What the union routes are asked about: every part's spectrum, and where each lies on the
+// template when every part was placed there (its region token from /v1/correspondence), so the
+// union is localized, and each step's overlap measured, on the template; for registered scans,
+// the session's union itself with what the scans cover together.
 function spectraForm() {
   const form = new FormData();
-  form.append("spectra", JSON.stringify(parts.map((part) => part.eigenvalues)));
-  if (parts.every((part) => part.region)) form.append("regions", JSON.stringify(parts.map((part) => part.region)));
+  const operands = session ? [{ eigenvalues: session.eigenvalues, region: session.region_token }] : parts;
+  form.append("spectra", JSON.stringify(operands.map((part) => part.eigenvalues)));
+  if (operands.every((part) => part.region)) form.append("regions", JSON.stringify(operands.map((part) => part.region)));
   return form;
 }
 
-// What the served models do (GET /v1/models): what the union operator can be told (a model set
-// that reads no boundary share answers 422 to one, so the page sends only what the models read),
-// and whether uploaded parts are placed on the template.
+// What the served models do (GET /v1/models): whether uploaded parts are placed on the template.
 const served = fetch("/v1/models").then(answer);
-const toldInputs = served.then((models) => new Set(models.told));
-
-// The union routes' query: the overlaps and boundary shares measured so far (one per union
-// step), when registered, each only if the models read it.
-async function told(query = "") {
-  const reads = await toldInputs;
-  const params = new URLSearchParams(query);
-  if ($("registered").checked && parts.length > 1) {
-    for (const name of ["overlap", "boundary"]) {
-      if (reads.has(name)) params.set(name, parts.slice(1).map((part) => part[name]).join(","));
-    }
-  }
-  const text = params.toString();
-  return text ? `?${text}` : "";
-}
-
-// A registered scan's overlap and boundary share with the union so far (undefined for the first
-// scan), and the token of the union with it: asked before the scan joins, so a failure leaves the
-// session as it was.
-async function measured(footprint) {
-  if (unionFootprint === null) return { overlap: undefined, boundary: undefined, union: footprint };
-  const form = new FormData();
-  form.append("footprints", JSON.stringify([unionFootprint, footprint]));
-  const found = await answer(await fetch("/v1/overlap", { method: "POST", body: form }));
-  return { overlap: found.overlaps[0], boundary: found.boundaries[0], union: found.union_footprint };
-}
 
 async function answer(response) {
   const body = response.headers.get("content-type")?.includes("json") ? await response.json() : null;
@@ -74,22 +50,9 @@ async function answer(response) {
 
 async function addScan(file) {
   setStatus(`Solving ${file.name}…`);
-  const form = new FormData();
-  form.append("file", file, file.name);
-  const registered = $("registered").checked;
   try {
-    const whole = $("whole").checked;
-    // A partial scan is placed on the template (one solve gives its spectrum and its region);
-    // registered scans are measured by their footprints, whole-body scans capped.
-    const placed = (await served).correspondence && !registered && !whole;
-    const query = `units=${$("units").value}${registered ? "&footprint=true" : ""}${whole ? "&cap_holes=true" : ""}`;
-    const route = placed ? "/v1/correspondence" : "/v1/spectrum";
-    const report = await answer(await fetch(`${route}?${query}`, { method: "POST", body: form }));
-    const { overlap, boundary, union } = registered ? await measured(report.footprint) : {};
-    const region = placed ? report.region.token : undefined;
-    const footprint = report.footprint;
-    parts.push({ name: file.name, eigenvalues: report.eigenvalues, warnings: report.warnings, overlap, boundary, footprint, region });
-    if (registered) unionFootprint = union;
+    const part = $("registered").checked ? await addedToSession(file) : await solved(file);
+    parts.push({ ...part, name: file.name, file });
     $("registered").disabled = true; // one kind of session: every scan registered, or none
     await refresh();
   } catch (error) {
@@ -97,27 +60,45 @@ async function addScan(file) {
   }
 }
 
-// A registered session without one of its scans: the overlaps of the scans left, measured again
-// along their order, and the token of their union.
-async function remeasured() {
-  if (!$("registered").checked || parts.length === 0) {
-    unionFootprint = null;
-    return;
+// A scan solved on its own: placed on the template (one solve gives its spectrum and its region),
+// or, a whole-body scan, its holes capped.
+async function solved(file) {
+  const form = new FormData();
+  form.append("file", file, file.name);
+  const whole = $("whole").checked;
+  const placed = (await served).correspondence && !whole;
+  const query = `units=${$("units").value}${whole ? "&cap_holes=true" : ""}`;
+  const report = await answer(await fetch(`${placed ? "/v1/correspondence" : "/v1/spectrum"}?${query}`, { method: "POST", body: form }));
+  return { eigenvalues: report.eigenvalues, warnings: report.warnings, region: placed ? report.region.token : undefined };
+}
+
+// A registered scan added to the page's session (made with the first scan); the session answers
+// the union of all its views. A scan the service refuses leaves the session as it was.
+async function addedToSession(file) {
+  if (session === null) {
+    const options = { registered: true, units: $("units").value };
+    const made = await fetch("/v1/sessions", { method: "POST", headers: { "content-type": "application/json" }, body: JSON.stringify(options) });
+    session = await answer(made);
   }
   const form = new FormData();
-  form.append("footprints", JSON.stringify(parts.map((part) => part.footprint)));
-  const found = await answer(await fetch("/v1/overlap", { method: "POST", body: form }));
-  parts.forEach((part, index) => {
-    part.overlap = index ? found.overlaps[index - 1] : undefined;
-    part.boundary = index ? found.boundaries[index - 1] : undefined;
-  });
-  unionFootprint = found.union_footprint;
+  form.append("file", file, file.name);
+  session = await answer(await fetch(`/v1/sessions/${session.id}/views`, { method: "POST", body: form }));
+  const view = session.views[session.views.length - 1];
+  return { eigenvalues: view.eigenvalues, warnings: view.warnings, region: view.region_token };
+}
+
+// A registered session without one of its scans: a new session of the scans left, in their order.
+async function resession() {
+  const ended = session;
+  session = null;
+  for (const part of parts) await addedToSession(part.file);
+  if (ended) fetch(`/v1/sessions/${ended.id}`, { method: "DELETE" });
 }
 
 async function removeScan(index) {
   const [removed] = parts.splice(index, 1);
   try {
-    await remeasured();
+    if ($("registered").checked) await resession();
     await refresh();
   } catch (error) {
     setStatus(`removing ${removed.name}: ${error.message}`, true);
@@ -143,12 +124,6 @@ async function refresh() {
   const item = (part, index) => {
     const li = document.createElement("li");
     li.textContent = `${part.name}: λ₁ = ${part.eigenvalues[0].toFixed(3)}`;
-    if (part.overlap !== undefined) {
-      li.dataset.overlap = part.overlap.toFixed(4);
-      li.dataset.boundary = part.boundary.toFixed(4);
-      li.textContent += `; ${(100 * part.overlap).toFixed(0)} % inside the scans before, `;
-      li.textContent += `${(100 * part.boundary).toFixed(0)} % of both edges left open (measured)`;
-    }
     for (const warning of part.warnings) {
       const note = document.createElement("span");
       note.className = "warning";
@@ -167,15 +142,16 @@ async function refresh() {
   $("parts").replaceChildren(...parts.map(item));
   setStatus(`Uniting ${parts.length} part${parts.length > 1 ? "s" : ""}…`);
   const [region, ply, found, rebuilt] = await Promise.all([
-    fetch(`/v1/localize${await told()}`, { method: "POST", body: spectraForm() }).then(answer),
-    fetch(`/v1/localize${await told("format=ply")}`, { method: "POST", body: spectraForm() }).then((r) => r.arrayBuffer()),
-    fetch(`/v1/retrieve${await told(`top=${RETRIEVED}`)}`, { method: "POST", body: spectraForm() }).then(answer),
-    fetch(`/v1/reconstruct${await told("format=ply")}`, { method: "POST", body: spectraForm() }),
+    fetch("/v1/localize", { method: "POST", body: spectraForm() }).then(answer),
+    fetch("/v1/localize?format=ply", { method: "POST", body: spectraForm() }).then((r) => r.arrayBuffer()),
+    fetch(`/v1/retrieve?top=${RETRIEVED}`, { method: "POST", body: spectraForm() }).then(answer),
+    fetch("/v1/reconstruct?format=ply", { method: "POST", body: spectraForm() }),
   ]);
-  plot(region);
+  plot(session ?? region); // a session's union carries its own σ
+  document.body.dataset.unionBy = session ? session.union_by : "";
   covered.show(ply);
   showCoverage(region);
-  showWarnings(region.warnings);
+  showWarnings([...(session?.warnings ?? []), ...region.warnings]);
   $("located").textContent = region.located_by === "correspondence"
     ? "Coverage from where each scan's vertices lie on the template (correspondence)."
     : "Coverage read from the union's spectrum: the region may be the mirror image of the scanned one.";
