@@ -268,8 +268,11 @@ def _point_cloud_from(geometries: list) -> PointCloud:
 
 
 def _ply_boundary_flags(cloud: trimesh.PointCloud) -> np.ndarray | None:
-    """The optional PLY vertex property ``boundary`` (non-zero = boundary point)."""
+    """The optional PLY vertex property ``boundary`` (non-zero = boundary point): trimesh keeps an
+    ASCII file's properties as a dict of columns and a binary file's as one structured array."""
     raw = cloud.metadata.get("_ply_raw", {}).get("vertex", {}).get("data", {})
+    if isinstance(raw, np.ndarray) and raw.dtype.names and "boundary" in raw.dtype.names:
+        return np.asarray(raw["boundary"]).reshape(-1) != 0
     if not isinstance(raw, dict) or "boundary" not in raw:
         return None
     return np.asarray(raw["boundary"]).reshape(-1) != 0

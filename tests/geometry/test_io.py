@@ -63,10 +63,22 @@ def test_point_cloud_formats_round_trip(patch):
         np.testing.assert_allclose(cloud.points, points, rtol=1e-12)
 
 
-def test_ply_boundary_property_is_read():
+def binary_ply(points: np.ndarray, boundary: np.ndarray) -> bytes:
+    """A binary little-endian PLY point cloud with a ``boundary`` vertex property."""
+    rows = np.zeros(len(points), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("boundary", "u1")])
+    rows["x"], rows["y"], rows["z"] = points.T
+    rows["boundary"] = boundary
+    properties = "".join(f"property float {axis}\n" for axis in "xyz") + "property uchar boundary\n"
+    header = f"ply\nformat binary_little_endian 1.0\nelement vertex {len(points)}\n{properties}end_header\n"
+    return header.encode() + rows.tobytes()
+
+
+@pytest.mark.parametrize("encoding", ["ascii", "binary"])
+def test_ply_boundary_property_is_read(encoding):
     points = np.random.default_rng(0).standard_normal((50, 3))
     flags = np.arange(50) % 7 == 0
-    cloud = load_shape(ascii_ply(points, boundary=flags), "ply", max_vertices=CAP)
+    data = ascii_ply(points, boundary=flags) if encoding == "ascii" else binary_ply(points, flags)
+    cloud = load_shape(data, "ply", max_vertices=CAP)
     np.testing.assert_array_equal(cloud.boundary, flags)
 
 
