@@ -198,14 +198,18 @@ def calibrate_sessions_command(
     people: Annotated[int, typer.Option(help="Calibration people (scanned as a front-end does).")] = 8,
     held_out: Annotated[int, typer.Option(help="Held-out people the coverage is scored on.")] = 4,
     seed: Annotated[int, typer.Option(help="Calibration people's seed; held-out people use seed + 1.")] = 1,
+    test_c: Annotated[int, typer.Option(help="Test C's people the sessions are scored on (at most 9).")] = 6,
 ) -> None:
-    """σ of a registered session's fused union, by view count, from anny sessions with exact truth."""
+    """σ of a registered session's fused union, by view count, from anny sessions with exact truth;
+    then the sessions as served scored on Test C's people, into the model card."""
     import json
 
     from training.sessions.calibrate import calibrate_sessions
 
-    content = calibrate_sessions(models, people, held_out, seed)
-    typer.echo(json.dumps(content["bands"], indent=1))
+    command = f"spectral-unions-train calibrate-sessions --models {models} --people {people} --held-out {held_out}"
+    command += f" --seed {seed} --test-c {test_c}"
+    content = calibrate_sessions(models, people, held_out, seed, test_c, command)
+    typer.echo(json.dumps({"methods": content["methods"], "evaluation": content["evaluation"]}, indent=1))
 
 
 def _pipeline(verb: str, data: Path, runs: Path, models: Path, preset: str, seed: int) -> None:

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from training.correspondence.card import PLACING_GOAL_MS, worst_served_gap
 from training.learning.card import percent, replace_block
+from training.sessions import card as sessions_card
 
 BEGIN, END = "<!-- glance:begin -->", "<!-- glance:end -->"
 CARD = "MODEL_CARD.md"
@@ -181,6 +182,19 @@ def session_pair_row(metrics: dict) -> Row:
     )
 
 
+def scanning_session_row(metrics: dict) -> Row:
+    """A scanning session's union as /v1/sessions answers it, worst over lengths and deliveries."""
+    span = sessions_card.lengths(metrics)
+    met = sessions_card.goals(metrics)
+    return (
+        f"a scanning session's union, {span[0]}–{span[-1]} views (Test C people), unregistered / registered",
+        f"worst {percent(sessions_card.worst(metrics, 'unregistered'))} / "
+        f"{percent(sessions_card.worst(metrics, 'registered'))}",
+        f"≤ {100 * sessions_card.GOAL_ANY:.0f} % / ≤ {100 * sessions_card.GOAL_REGISTERED:.0f} % at every length",
+        all(met.values()),
+    )
+
+
 def placing_cost_row(metrics: dict) -> Row:
     """What the evaluation measured placing the sample part cost, on the machine that ran it."""
     cost = metrics["cost"]
@@ -212,6 +226,7 @@ SOURCES: tuple[tuple[str, tuple[Callable[[dict], Row], ...]], ...] = (
         (camera_region_row, random_region_row, part_coverage_row, session_pair_row, placing_cost_row),
     ),
     ("reconstruction.json", (decoder_row,)),
+    ("sessions.json", (scanning_session_row,)),
 )
 
 

@@ -39,10 +39,11 @@ from app.api.problems import ProblemError
 from app.core.errors import InputError
 from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport, solve_bytes
 from app.inference.correspondence import places_in_worker
+from app.sessions.aligned import aligned_spectrum
 from app.sessions.fused import View, fused_spectrum
 
 RETRY_AFTER_SECONDS = 1  # a solve takes ~0.1–0.3 s: a place frees within a second
-_PRELOADED = ["app.geometry.pipeline", "app.inference.correspondence", "app.sessions.fused"]
+_PRELOADED = ["app.geometry.pipeline", "app.inference.correspondence", "app.sessions.aligned"]
 _CONTEXT = multiprocessing.get_context("forkserver")
 
 
@@ -104,11 +105,13 @@ def _solve_task(
     raise SolveMemoryExceeded("the solve needed more memory than a solver worker may use")
 
 
-def _fuse_task(views: list[View], k: int) -> np.ndarray:
-    """The worker's task for a registered session: its views fused and solved once
-    (:func:`app.sessions.fused.fused_spectrum`), a memory failure answered as a solve's is."""
+def _session_task(views: list[View], places: list[np.ndarray] | None, k: int) -> np.ndarray | None:
+    """The worker's task for a session's union: registered views fused and solved once
+    (:func:`app.sessions.fused.fused_spectrum`), or, with their ``places``, views in their own
+    frames aligned first (:func:`app.sessions.aligned.aligned_spectrum`: None where they do not
+    come together); a memory failure answered as a solve's is."""
     try:
-        return fused_spectrum(views, k)
+        return fused_spectrum(views, k) if places is None else aligned_spectrum(views, places, k)
     except MemoryError:
         pass
     gc.collect()
@@ -201,11 +204,11 @@ class SolverPool:
         SOLVES.observe((solved.report.assembly_ms + solved.report.solve_ms) / 1e3)
         return solved
 
-    async def fuse(self, views: list[View], k: int) -> np.ndarray:
-        """The first ``k`` eigenvalues of registered views' union, solved in a worker under the
-        same deadline and memory cap as an upload (:func:`_fuse_task`)."""
+    async def session_union(self, views: list[View], places: list[np.ndarray] | None, k: int) -> np.ndarray | None:
+        """The first ``k`` eigenvalues of a session's union solved on its views, in a worker under
+        the same deadline and memory cap as an upload (:func:`_session_task`)."""
         async with self.limiter:
-            return await self._run(_fuse_task, (views, k), "the solve of the session's fused views")
+            return await self._run(_session_task, (views, places, k), "the solve of the session's views")
 
     async def _run(self, task: Callable, args: tuple, what: str) -> Any:
         """A task on the pool, its deadline and a dead worker answered as problems."""

@@ -39,7 +39,7 @@ from app.inference.manifest import verify_manifest
 from app.inference.nesting import NESTED_OVERLAP, Nesting, nested_step
 from app.inference.spectra import InvalidSpectrum
 from app.inference.template import PART_NAMES, Template, localized_region, part_coverage
-from app.sessions.calibration import FusedCalibration
+from app.sessions.calibration import SessionCalibration
 
 
 @dataclass(frozen=True)
@@ -193,7 +193,7 @@ class SpectralModels:
         self.correspondence = None
         if CORRESPONDENCE_FILE in checked:
             self.correspondence = CorrespondenceModel(directory / CORRESPONDENCE_FILE, self.template_regions, threads)
-        self.fused = FusedCalibration.load(directory / SESSIONS_FILE, self.k) if SESSIONS_FILE in checked else None
+        self.sessions = SessionCalibration.load(directory / SESSIONS_FILE, self.k) if SESSIONS_FILE in checked else None
         optional = [name for name in (RECONSTRUCTION_FILE, CORRESPONDENCE_FILE, SESSIONS_FILE) if name in checked]
         served = [UNION_FILE, LOCALIZER_FILE, *optional]
         digest = hashlib.sha256(b"".join((directory / name).read_bytes() for name in served))

@@ -253,5 +253,8 @@ def fused_spectrum(views: list[View], k: int) -> np.ndarray:
     uploaded point cloud is: Dirichlet on its boundary, or closed where none is left."""
     cloud = fused_cloud(views)
     closed = not cloud.boundary.any()
-    shape = PointCloud(cloud.points, None if closed else cloud.boundary)
+    # Centred: robust-laplacian's point-cloud Laplacian drifts with the distance from the origin
+    # (a unit sphere's λ₁ 5 % low 10 m out), and a session's frame is wherever its scanner put it.
+    centred = cloud.points - cloud.points.mean(axis=0)
+    shape = PointCloud(centred, None if closed else cloud.boundary)
     return np.asarray(cloud_spectrum(shape, SpectrumOptions(k=k, closed=closed)).eigenvalues)

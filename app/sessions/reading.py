@@ -1,7 +1,7 @@
 """A session read as a whole: its views in one snapshot and their union, solved only when the
 union cached with the session was read from fewer views (or other models). Free of HTTP: the
-store's calls run off the event loop, and a registered session's views are fused by whatever
-``fuse`` the caller gives (the service's solver workers)."""
+store's calls run off the event loop, and the views are fused (registered) or aligned and fused
+by whatever ``solve`` the caller gives (the service's solver workers)."""
 
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -15,7 +15,9 @@ from app.sessions.records import SessionMeta
 from app.sessions.session import SessionUnion, SessionView, session_union, union_by
 from app.sessions.store import SessionStore
 
-Fuse = Callable[[list[View], int], Awaitable[np.ndarray]]
+# (views, their places on the template or None for registered views, k) → the spectrum solved on
+# the views, or None where views in their own frames could not be aligned
+Solve = Callable[[list[View], list[np.ndarray] | None, int], Awaitable[np.ndarray | None]]
 
 
 @dataclass(frozen=True)
@@ -27,18 +29,21 @@ class SessionState:
     union: SessionUnion
 
 
-async def session_state(store: SessionStore, models: SpectralModels, session_id: str, fuse: Fuse) -> SessionState:
+async def session_state(store: SessionStore, models: SpectralModels, session_id: str, solve: Solve) -> SessionState:
     """The session now: SessionNotFound when it is gone."""
     meta, views = await anyio.to_thread.run_sync(store.views, session_id, len(models.template.vertices))
     union = await anyio.to_thread.run_sync(store.cached_union, session_id, len(views), models.version)
     if union is None:
-        union = await _read_union(models, views, meta.registered, fuse)
+        union = await _read_union(models, views, meta.registered, solve)
         await anyio.to_thread.run_sync(store.cache_union, session_id, len(views), models.version, union)
     return SessionState(meta, views, union)
 
 
-async def _read_union(models: SpectralModels, views: list[SessionView], registered: bool, fuse: Fuse) -> SessionUnion:
-    fused = None
-    if union_by(len(views), registered) == "fused":
-        fused = await fuse([view.geometry for view in views], models.k)
-    return await anyio.to_thread.run_sync(session_union, models, views, registered, fused)
+async def _read_union(models: SpectralModels, views: list[SessionView], registered: bool, solve: Solve) -> SessionUnion:
+    """The union as :func:`union_by` reads it; views that cannot be aligned go through the chain."""
+    by, solved = union_by(len(views), registered, models.sessions), None
+    if by in ("fused", "aligned"):
+        places = None if by == "fused" else [view.places for view in views]
+        solved = await solve([view.geometry for view in views], places, models.k)
+        by = by if solved is not None else "learned-chain"
+    return await anyio.to_thread.run_sync(session_union, models, views, by, solved)

@@ -52,6 +52,7 @@ def view_row(view: SessionView) -> tuple:
         mass=geometry.mass.astype(np.float32),
         boundary=geometry.boundary,
         edges=geometry.edges.astype(np.int32),
+        places=view.places.astype(np.float32),
     )
     return (
         view.source,
@@ -74,10 +75,11 @@ def view_of_row(row: tuple, template_vertices: int) -> SessionView:
             arrays["boundary"].astype(bool),
             arrays["edges"].astype(np.int64),
         )
+        places = arrays["places"].astype(np.float64)
     cover = region_from_token(region, template_vertices, "stored view")
     located = Located(cover, float(confidence), float(area))
     values = np.frombuffer(bytes(eigenvalues), dtype=np.float64).copy()
-    return SessionView(source, values, view, located, tuple(json.loads(warnings)))
+    return SessionView(source, values, view, places, located, tuple(json.loads(warnings)))
 
 
 def union_text(union: SessionUnion) -> str:

@@ -9,8 +9,11 @@ views at once, never from the union answered before, so no prediction is fed bac
 - registered views (one frame and pose, as a tracked scanner sends them): the views fused and
   solved once (:mod:`app.sessions.fused`), σ from the sessions' calibration
   (:mod:`app.sessions.calibration`);
-- views in their own frames or poses: the learned operator folded over the views' spectra,
-  each step told what their places on the template say (:mod:`app.sessions.chain`).
+- views in their own frames: where the calibration found it closer for sessions of this many
+  views, the views brought into one frame through their places on the template and fused
+  (:mod:`app.sessions.aligned`); otherwise, or where they do not come together (another pose),
+  the learned operator folded over the views' spectra, each step told what their places on the
+  template say (:mod:`app.sessions.chain`).
 
 Coverage is read from the views' places in every case.
 """
@@ -24,21 +27,24 @@ from app.geometry.pipeline import Solved
 from app.inference.correspondence import PlacedPart
 from app.inference.cover import Cover, united
 from app.inference.models import SpectralModels, UnionEstimate
+from app.sessions.calibration import SessionCalibration
 from app.sessions.chain import Located, chained_union, template_fold
 from app.sessions.fused import View, view_of_part
 
-UnionBy = Literal["empty", "view", "fused", "learned-chain"]
+UnionBy = Literal["empty", "view", "fused", "aligned", "learned-chain"]
 LEAST_COVERED = 3  # the body parts a session answers as least covered: what to scan next
 
 
 @dataclass(frozen=True)
 class SessionView:
     """One view as a session keeps it: its name, spectrum (k,), geometry in the upload's frame
-    (metres), place on the template and the warnings its solve and placing raised."""
+    (metres), its points' places on the template (n, 3), where it lies there, and the warnings
+    its solve and placing raised."""
 
     source: str
     eigenvalues: np.ndarray
     geometry: View
+    places: np.ndarray
     located: Located
     warnings: tuple[str, ...]
 
@@ -54,30 +60,35 @@ class SessionUnion:
     overlaps_told: list[bool] = field(default_factory=list)
 
 
-def union_by(views: int, registered: bool) -> UnionBy:
-    """How a session of ``views`` views is read (the module docstring)."""
+def union_by(views: int, registered: bool, calibration: SessionCalibration | None) -> UnionBy:
+    """How a session of ``views`` views is read (the module docstring): fused or aligned only
+    with the calibration that gives their σ."""
     if views == 0:
         return "empty"
     if views == 1:
         return "view"
-    return "fused" if registered else "learned-chain"
+    if calibration is None:
+        return "learned-chain"
+    return "fused" if registered else calibration.unregistered_by(views)
 
 
 def session_union(
-    models: SpectralModels, views: list[SessionView], registered: bool, fused: np.ndarray | None = None
+    models: SpectralModels, views: list[SessionView], by: UnionBy, solved: np.ndarray | None = None
 ) -> SessionUnion:
-    """The union of ``views``; ``fused``: the fused views' spectrum, where they are registered
-    (solved by the caller, in a solver worker: :func:`app.sessions.fused.fused_spectrum`)."""
-    by = union_by(len(views), registered)
+    """The union of ``views`` read ``by`` (:func:`union_by`, or learned-chain where aligning
+    failed); ``solved``: for fused and aligned, the spectrum the caller solved on the views (in a
+    solver worker: :func:`app.sessions.fused.fused_spectrum`,
+    :func:`app.sessions.aligned.aligned_spectrum`)."""
     if by == "empty":
         return SessionUnion(UnionEstimate(np.zeros(0), np.zeros(0)), by)
     if by == "view":
         values = views[0].eigenvalues
         return SessionUnion(UnionEstimate(values, np.zeros_like(values)), by)
-    if by == "fused":
-        if fused is None or models.fused is None:
-            raise ValueError("a registered session's union needs its fused spectrum and the sessions' calibration")
-        return SessionUnion(UnionEstimate(fused, models.fused.sigma(fused, len(views))), by)
+    if by in ("fused", "aligned"):
+        if solved is None or models.sessions is None:
+            raise ValueError(f"a {by} union needs its spectrum and the sessions' calibration")
+        bands = models.sessions.fused if by == "fused" else models.sessions.aligned
+        return SessionUnion(UnionEstimate(solved, bands.sigma(solved, len(views))), by)
     fold = template_fold(models, [view.located for view in views])
     estimate = chained_union(models, [view.eigenvalues for view in views], fold)
     told = fold.told or [None] * len(fold.overlaps)
@@ -100,4 +111,5 @@ def session_view(source: str, solved: Solved, placed: PlacedPart, doubts: list[s
     the view a session keeps; ``doubts``: what the placing found too uncertain to trust."""
     warnings = tuple(solved.report.warnings) + tuple(doubts)
     values = np.asarray(solved.report.eigenvalues, dtype=np.float64)
-    return SessionView(source, values, view_of_part(solved.part), Located.placed(placed), warnings)
+    geometry, places = view_of_part(solved.part), placed.placement.position
+    return SessionView(source, values, geometry, places, Located.placed(placed), warnings)

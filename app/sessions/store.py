@@ -15,11 +15,11 @@ import sqlite3
 import time
 import uuid
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
-from app.retrieval.store import StoreUnavailable
+from app.retrieval.store import Connection, StoreUnavailable
 from app.sessions.records import (
     VIEW_COLUMNS,
     SessionFull,
@@ -98,8 +98,102 @@ def new_session_id() -> str:
     return uuid.uuid4().hex
 
 
-class SQLiteSessions:
-    """Sessions in the service's SQLite file, beside the shape store's tables."""
+class SessionRows:
+    """The sessions' operations, written once for both engines: each runs in one transaction of
+    the engine's (``_transaction``), its SQL written with ``?`` marks and the engine's own put in
+    (``PLACEHOLDER``); the read of a session a view is added to takes the engine's row lock
+    (``LOCK``) where the transaction alone does not keep other writers out."""
+
+    PLACEHOLDER = "?"
+    LOCK = ""
+    ttl: float
+
+    def _transaction(self, write: bool = True) -> AbstractContextManager[Connection]:
+        raise NotImplementedError
+
+    def _run(self, connection: Connection, query: str, parameters: tuple = ()) -> Any:
+        return connection.execute(query.replace("?", self.PLACEHOLDER), parameters)
+
+    def _live(self, connection: Connection, session_id: str, lock: bool = False) -> SessionMeta:
+        query = f"SELECT {META_COLUMNS} FROM scan_sessions WHERE id = ? AND touched_at >= ?" + (self.LOCK * lock)
+        row = self._run(connection, query, (session_id, time.time() - self.ttl)).fetchone()
+        if row is None:
+            raise SessionNotFound(session_id)
+        return _meta(row)
+
+    def create(self, registered: bool, units: str, scale: float | None) -> SessionMeta:
+        now = time.time()
+        meta = SessionMeta(new_session_id(), registered, units, scale, now, now, 0)
+        with self._transaction() as connection:
+            expired = "SELECT id FROM scan_sessions WHERE touched_at < ?"
+            self._run(connection, f"DELETE FROM scan_session_views WHERE session_id IN ({expired})", (now - self.ttl,))
+            self._run(connection, "DELETE FROM scan_sessions WHERE touched_at < ?", (now - self.ttl,))
+            self._run(
+                connection,
+                f"INSERT INTO scan_sessions ({META_COLUMNS}) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (meta.id, registered, units, scale, now, now, 0),
+            )
+        return meta
+
+    def meta(self, session_id: str) -> SessionMeta:
+        with self._transaction(write=False) as connection:
+            return self._live(connection, session_id)
+
+    def add_view(self, session_id: str, view: SessionView, max_views: int) -> SessionMeta:
+        with self._transaction() as connection:
+            meta = self._live(connection, session_id, lock=True)
+            if meta.views >= max_views:
+                raise SessionFull(f"the session holds {meta.views} views, as many as this service keeps")
+            marks = ", ".join("?" * (len(VIEW_COLUMNS) + 2))
+            self._run(
+                connection,
+                f"INSERT INTO scan_session_views (session_id, position, {', '.join(VIEW_COLUMNS)}) VALUES ({marks})",
+                (session_id, meta.views, *view_row(view)),
+            )
+            now = time.time()
+            self._run(
+                connection, "UPDATE scan_sessions SET views = views + 1, touched_at = ? WHERE id = ?", (now, session_id)
+            )
+        return SessionMeta(meta.id, meta.registered, meta.units, meta.scale, meta.created_at, now, meta.views + 1)
+
+    def views(self, session_id: str, template_vertices: int) -> tuple[SessionMeta, list[SessionView]]:
+        with self._transaction(write=False) as connection:
+            meta = self._live(connection, session_id)
+            rows = self._run(
+                connection,
+                f"SELECT {', '.join(VIEW_COLUMNS)} FROM scan_session_views WHERE session_id = ? ORDER BY position",
+                (session_id,),
+            ).fetchall()
+        return meta, [view_of_row(row, template_vertices) for row in rows]
+
+    def cached_union(self, session_id: str, views: int, version: str) -> SessionUnion | None:
+        with self._transaction(write=False) as connection:
+            row = self._run(
+                connection,
+                "SELECT union_text FROM scan_sessions WHERE id = ? AND union_views = ? AND union_version = ?",
+                (session_id, views, version),
+            ).fetchone()
+        return union_of_text(row[0]) if row else None
+
+    def cache_union(self, session_id: str, views: int, version: str, union: SessionUnion) -> None:
+        """Cache a union read from ``views`` views, unless the session has others by now."""
+        with self._transaction() as connection:
+            self._run(
+                connection,
+                "UPDATE scan_sessions SET union_views = ?, union_version = ?, union_text = ? "
+                "WHERE id = ? AND views = ?",
+                (views, version, union_text(union), session_id, views),
+            )
+
+    def delete(self, session_id: str) -> bool:
+        with self._transaction() as connection:
+            self._run(connection, "DELETE FROM scan_session_views WHERE session_id = ?", (session_id,))
+            return self._run(connection, "DELETE FROM scan_sessions WHERE id = ?", (session_id,)).rowcount > 0
+
+
+class SQLiteSessions(SessionRows):
+    """Sessions in the service's SQLite file, beside the shape store's tables: every write takes
+    the file's write lock first (``BEGIN IMMEDIATE``), so no row lock is needed."""
 
     def __init__(self, path: Path, ttl_seconds: float) -> None:
         self.path = path
@@ -134,79 +228,6 @@ class SQLiteSessions:
             raise StoreUnavailable(f"SQLite file {self.path}: {exc}") from exc
         finally:
             connection.close()
-
-    def _live(self, connection: sqlite3.Connection, session_id: str) -> SessionMeta:
-        row = connection.execute(
-            f"SELECT {META_COLUMNS} FROM scan_sessions WHERE id = ? AND touched_at >= ?",
-            (session_id, time.time() - self.ttl),
-        ).fetchone()
-        if row is None:
-            raise SessionNotFound(session_id)
-        return _meta(row)
-
-    def create(self, registered: bool, units: str, scale: float | None) -> SessionMeta:
-        now = time.time()
-        meta = SessionMeta(new_session_id(), registered, units, scale, now, now, 0)
-        with self._transaction() as connection:
-            expired = "SELECT id FROM scan_sessions WHERE touched_at < ?"
-            connection.execute(f"DELETE FROM scan_session_views WHERE session_id IN ({expired})", (now - self.ttl,))
-            connection.execute("DELETE FROM scan_sessions WHERE touched_at < ?", (now - self.ttl,))
-            connection.execute(
-                f"INSERT INTO scan_sessions ({META_COLUMNS}) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                (meta.id, int(registered), units, scale, now, now, 0),
-            )
-        return meta
-
-    def meta(self, session_id: str) -> SessionMeta:
-        with self._transaction(write=False) as connection:
-            return self._live(connection, session_id)
-
-    def add_view(self, session_id: str, view: SessionView, max_views: int) -> SessionMeta:
-        with self._transaction() as connection:
-            meta = self._live(connection, session_id)
-            if meta.views >= max_views:
-                raise SessionFull(f"the session holds {meta.views} views, as many as this service keeps")
-            marks = ", ".join("?" * (len(VIEW_COLUMNS) + 2))
-            connection.execute(
-                f"INSERT INTO scan_session_views (session_id, position, {', '.join(VIEW_COLUMNS)}) VALUES ({marks})",
-                (session_id, meta.views, *view_row(view)),
-            )
-            now = time.time()
-            connection.execute(
-                "UPDATE scan_sessions SET views = views + 1, touched_at = ? WHERE id = ?", (now, session_id)
-            )
-        return SessionMeta(meta.id, meta.registered, meta.units, meta.scale, meta.created_at, now, meta.views + 1)
-
-    def views(self, session_id: str, template_vertices: int) -> tuple[SessionMeta, list[SessionView]]:
-        with self._transaction(write=False) as connection:
-            meta = self._live(connection, session_id)
-            rows = connection.execute(
-                f"SELECT {', '.join(VIEW_COLUMNS)} FROM scan_session_views WHERE session_id = ? ORDER BY position",
-                (session_id,),
-            ).fetchall()
-        return meta, [view_of_row(row, template_vertices) for row in rows]
-
-    def cached_union(self, session_id: str, views: int, version: str) -> SessionUnion | None:
-        with self._transaction(write=False) as connection:
-            row = connection.execute(
-                "SELECT union_text FROM scan_sessions WHERE id = ? AND union_views = ? AND union_version = ?",
-                (session_id, views, version),
-            ).fetchone()
-        return union_of_text(row[0]) if row else None
-
-    def cache_union(self, session_id: str, views: int, version: str, union: SessionUnion) -> None:
-        """Cache a union read from ``views`` views, unless the session has others by now."""
-        with self._transaction() as connection:
-            connection.execute(
-                "UPDATE scan_sessions SET union_views = ?, union_version = ?, union_text = ? "
-                "WHERE id = ? AND views = ?",
-                (views, version, union_text(union), session_id, views),
-            )
-
-    def delete(self, session_id: str) -> bool:
-        with self._transaction() as connection:
-            connection.execute("DELETE FROM scan_session_views WHERE session_id = ?", (session_id,))
-            return connection.execute("DELETE FROM scan_sessions WHERE id = ?", (session_id,)).rowcount > 0
 
     def close(self) -> None:
         """Nothing held open: every operation has its own short-lived connection."""

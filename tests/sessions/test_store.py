@@ -29,7 +29,8 @@ def a_view(seed: int) -> SessionView:
     region = rng.random(TEMPLATE_VERTICES) < 0.3
     located = Located(Cover(region, region.astype(float)), float(rng.random()), float(rng.random()))
     values = np.sort(rng.random(20) * 100)
-    return SessionView(f"view{seed}.ply", values, geometry, located, (f"warning {seed}",))
+    places = rng.normal(size=(50, 3))
+    return SessionView(f"view{seed}.ply", values, geometry, places, located, (f"warning {seed}",))
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])
@@ -56,6 +57,7 @@ def test_a_view_comes_back_as_it_went_in(store_for):
     np.testing.assert_allclose(back.geometry.mass, sent.geometry.mass, rtol=1e-6)
     np.testing.assert_array_equal(back.geometry.boundary, sent.geometry.boundary)
     np.testing.assert_array_equal(back.geometry.edges, sent.geometry.edges)
+    np.testing.assert_allclose(back.places, sent.places, rtol=1e-6)
     np.testing.assert_array_equal(back.located.cover.region, sent.located.cover.region)
     assert back.located.confidence == sent.located.confidence and back.located.area == sent.located.area
 

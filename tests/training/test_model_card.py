@@ -17,6 +17,7 @@ from training.glance import (
     unseen_types_row,
 )
 from training.learning.card import BEGIN, END, EVALUATION, render, render_summary
+from training.sessions import card as sessions_card
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 CARD = (MODELS / "MODEL_CARD.md").read_text()
@@ -41,6 +42,23 @@ def test_the_correspondence_section_is_what_its_metrics_give():
     section = block(CARD, correspondence_card.BEGIN, correspondence_card.END)
     metrics = json.loads((MODELS / "correspondence.json").read_text())
     assert section == correspondence_card.render(metrics, command_of(section))
+
+
+def test_the_sessions_section_is_what_its_metrics_give():
+    section = block(CARD, sessions_card.BEGIN, sessions_card.END)
+    metrics = json.loads((MODELS / "sessions.json").read_text())
+    assert section == sessions_card.render(metrics, command_of(section))
+
+
+def test_a_session_goal_is_judged_on_every_length_and_delivery():
+    metrics = json.loads((MODELS / "sessions.json").read_text())
+    for row in metrics["evaluation"].values():
+        row["unregistered"], row["registered"] = 0.05, 0.02
+    assert all(sessions_card.goals(metrics).values())
+    metrics["evaluation"]["24/remeshed"]["registered"] = 0.031  # one row over the registered goal: 1.1 points drift
+    verdicts = sessions_card.goals(metrics)
+    assert not verdicts["≤ 3 % at every length (registered)"] and not verdicts["24 views ≤ 3 views + 1 point"]
+    assert verdicts["≤ 6 % at every length (unregistered)"]
 
 
 def test_every_table_of_the_evaluation_is_what_the_metrics_give():

@@ -1,93 +1,141 @@
-"""``spectral-unions-train calibrate-sessions``: σ of fused session unions, measured on anny.
+"""``spectral-unions-train calibrate-sessions``: σ of session unions solved on their views, which
+way unregistered sessions are read, and the card's sessions table.
 
 Calibration people (their own seed) are scanned as a front-end scans (:mod:`training.sessions.
-scans`), both as cut and re-meshed; every prefix of a session in :data:`LENGTHS` is fused and
-solved as the service solves a registered session, and compared with its exact union. Per band
-of view counts and per eigenvalue, the relative σ is the 90th percentile of |fused − truth| /
-fused over INTERVAL_Z, so that fused ± INTERVAL_Z·σ holds 90 % of the calibration eigenvalues;
-held-out people (another seed) say how often it holds on people it was not fitted on. Written to
-``models/sessions.json`` (and the manifest), with the per-band errors the card reports.
+scans`), both as cut and re-meshed, and every prefix of a session in :data:`LENGTHS` is read
+every way the service can (:mod:`training.sessions.reading`). Per band of view counts and per
+eigenvalue, a method's relative σ is the 90th percentile of |estimate − truth| / estimate over
+INTERVAL_Z, so that estimate ± INTERVAL_Z·σ holds 90 % of the calibration eigenvalues (fused for
+registered views; aligned for views in their own frames, over the sessions that aligned); per
+band, unregistered sessions are read aligned where that was closer on the calibration people
+than the learned chain (a session that did not align counted at the chain's error, as served).
+Held-out people (another seed) say how often each interval holds there. Then Test C's people are
+scored as served (:mod:`training.sessions.evaluate`). Written to ``models/sessions.json``, the
+manifest and the card.
 """
 
 import json
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from app.contract import INTERVAL_Z, SESSIONS_FILE
 from app.inference.manifest import write_manifest
-from app.sessions.fused import fused_spectrum, view_of_part
-from training.sessions.scans import VARIANTS, K, people, solved_view, union_spectrum, view_meshes
+from app.inference.models import SpectralModels
+from app.sessions.calibration import Bands, SessionCalibration
+from training.glance import CARD, update_glance
+from training.learning.card import replace_block
+from training.sessions.card import BEGIN, END, render
+from training.sessions.evaluate import evaluate_sessions
+from training.sessions.reading import Read, read_prefixes, session_views
+from training.sessions.scans import VARIANTS, K, people, relative_error
 
 BANDS = (3, 8, 16, 32)  # a band holds sessions of more views than the band before, up to this many
-LENGTHS = (2, 3, 4, 6, 8, 10, 12, 16, 20, 24, 28, 32)
+LENGTHS = (2, 3, 4, 6, 8, 12, 16, 24, 32)
 COVERAGE = 0.90
 
 
-@dataclass(frozen=True)
-class Residuals:
-    """Per fused session: its view count, and |fused − truth| / fused for each eigenvalue."""
-
-    views: np.ndarray  # (s,)
-    relative: np.ndarray  # (s, k)
-    error: np.ndarray  # (s,) mean |fused − truth| / truth
-
-
-def residuals(count: int, seed: int) -> Residuals:
-    """Every session prefix of ``count`` people of ``seed``, both variants, fused against truth."""
+def reads(models: SpectralModels, count: int, seed: int) -> list[Read]:
+    """Every session prefix of ``count`` people of ``seed``, both deliveries, read every way."""
     sampler, found = people(count, seed)
     faces = sampler.template.faces
-    views, relative, error = [], [], []
-    for person in found:
+    out = []
+    for number, person in enumerate(found):
         for variant in VARIANTS:
-            solved = [view_of_part(solved_view(mesh).part) for mesh in view_meshes(person, faces, variant)]
-            for length in LENGTHS:
-                if length > len(solved):
-                    continue
-                truth = union_spectrum(person.body, faces, person.masks[:length])
-                fused = fused_spectrum(solved[:length], K)
-                views.append(length)
-                relative.append(np.abs(fused - truth) / fused)
-                error.append(float(np.mean(np.abs(fused - truth) / truth)))
-    return Residuals(np.array(views), np.array(relative), np.array(error))
+            views = session_views(models, person, faces, variant)
+            out += read_prefixes(models, person, faces, views, LENGTHS, np.random.default_rng([seed, number]))
+    return out
 
 
-def band_of(views: np.ndarray) -> np.ndarray:
-    """Which band each session's view count falls in."""
-    return np.minimum(np.searchsorted(BANDS, views), len(BANDS) - 1)
+def band_of(views: int) -> int:
+    """Which band a session's view count falls in."""
+    return min(int(np.searchsorted(BANDS, views)), len(BANDS) - 1)
 
 
-def calibrate_sessions(models: Path, count: int, held_out: int, seed: int) -> dict:
-    """Fit the bands on ``count`` people of ``seed``, score them on ``held_out`` people of
-    ``seed + 1``; write ``models/sessions.json`` and the manifest; return what was written."""
-    fit, test = residuals(count, seed), residuals(held_out, seed + 1)
-    bands = []
+def _sigma(estimates: list[np.ndarray], truths: list[np.ndarray]) -> np.ndarray:
+    relative = np.abs(np.array(estimates) - np.array(truths)) / np.array(estimates)
+    return np.quantile(relative, COVERAGE, axis=0) / INTERVAL_Z
+
+
+def _held(estimates: list[np.ndarray], truths: list[np.ndarray], sigma: np.ndarray) -> float | None:
+    if not estimates:
+        return None
+    gap = np.abs(np.array(estimates) - np.array(truths))
+    return round(float(np.mean(gap <= INTERVAL_Z * sigma * np.array(estimates))), 4)
+
+
+def _unregistered_error(read: Read) -> float:
+    """The error of an aligned reading as served: the chain's where the views did not align."""
+    return relative_error(read.chain if read.aligned is None else read.aligned, read.truth)
+
+
+def fit_bands(fit: list[Read], test: list[Read]) -> dict[str, list[dict]]:
+    """Per band: fused and aligned σ, and how unregistered sessions are read, with held-out figures."""
+    methods: dict[str, list[dict]] = {"fused": [], "aligned": []}
     for band, up_to in enumerate(BANDS):
-        rows, tested = band_of(fit.views) == band, band_of(test.views) == band
-        if not rows.any():
+        rows = [r for r in fit if band_of(r.views) == band]
+        tested = [r for r in test if band_of(r.views) == band]
+        if not rows:
             raise ValueError(f"no calibration session of up to {up_to} views: scan more people")
-        sigma = np.quantile(fit.relative[rows], COVERAGE, axis=0) / INTERVAL_Z
-        held = test.relative[tested] <= INTERVAL_Z * sigma if tested.any() else np.zeros((0, K), bool)
-        bands.append(
+        fused = _sigma([r.fused for r in rows], [r.truth for r in rows])
+        methods["fused"].append(
             {
                 "views_up_to": up_to,
-                "relative_sigma": np.round(sigma, 6).tolist(),
-                "sessions": int(rows.sum()),
-                "held_out_sessions": int(tested.sum()),
-                "held_out_coverage": round(float(held.mean()), 4) if held.size else None,
-                "held_out_error": round(float(test.error[tested].mean()), 4) if tested.any() else None,
+                "relative_sigma": np.round(fused, 6).tolist(),
+                "sessions": len(rows),
+                "held_out_sessions": len(tested),
+                "held_out_coverage": _held([r.fused for r in tested], [r.truth for r in tested], fused),
             }
         )
+        aligned_rows = [r for r in rows if r.aligned is not None] or rows
+        aligned = _sigma(
+            [r.aligned if r.aligned is not None else r.fused for r in aligned_rows], [r.truth for r in aligned_rows]
+        )
+        closer = np.mean([_unregistered_error(r) for r in rows]) < np.mean(
+            [relative_error(r.chain, r.truth) for r in rows]
+        )
+        tested_aligned = [r for r in tested if r.aligned is not None]
+        methods["aligned"].append(
+            {
+                "views_up_to": up_to,
+                "relative_sigma": np.round(aligned, 6).tolist(),
+                "unregistered_by": "aligned" if closer else "learned-chain",
+                "sessions": len(rows),
+                "aligned_sessions": sum(r.aligned is not None for r in rows),
+                "held_out_sessions": len(tested),
+                "held_out_coverage": _held(
+                    [r.aligned for r in tested_aligned], [r.truth for r in tested_aligned], aligned
+                ),
+            }
+        )
+    return methods
+
+
+def calibrate_sessions(models: Path, count: int, held_out: int, seed: int, test_c: int, command: str) -> dict:
+    """Fit on ``count`` people of ``seed``, hold out ``held_out`` of ``seed + 1``, score the
+    sessions as served on ``test_c`` of Test C's people; write ``models/sessions.json``, the
+    manifest and the card's sessions section; return what was written."""
+    (models / SESSIONS_FILE).unlink(missing_ok=True)  # the models as served, without the calibration it replaces
+    write_manifest(models)
+    served = SpectralModels(models)
+    methods = fit_bands(reads(served, count, seed), reads(served, held_out, seed + 1))
+    calibration = SessionCalibration(
+        Bands.of(methods["fused"], K, "fused"),
+        Bands.of(methods["aligned"], K, "aligned"),
+        tuple(band["unregistered_by"] for band in methods["aligned"]),
+    )
     content = {
-        "method": "fused",
         "people": count,
         "held_out_people": held_out,
         "seed": seed,
         "lengths": list(LENGTHS),
         "interval_z": INTERVAL_Z,
-        "bands": bands,
+        "methods": {name: {"bands": bands} for name, bands in methods.items()},
+        "test_c_people": test_c,
+        "evaluation": evaluate_sessions(served, calibration, test_c),
     }
     (models / SESSIONS_FILE).write_text(json.dumps(content, indent=1) + "\n")
     write_manifest(models)
+    replace_block(models / CARD, BEGIN, END, render(content, command))
+    update_glance(models)
     return content

@@ -20,6 +20,7 @@ from training.data.spectra import region_mesh, remeshed
 
 K = 20
 VARIANTS = ("mesh", "remeshed")  # views as cut from the body, or re-meshed (30 % of vertices collapsed)
+SESSION_STREAM = 7  # a Test C person's session pose and cameras: a random stream the build does not use
 
 
 @dataclass(frozen=True)
@@ -69,6 +70,31 @@ def people(count: int, seed: int) -> tuple[RegionSampler, list[Person]]:
             rng = np.random.default_rng([seed, number, index])
             body = source.body.pose(identity, source.body.valid_poses(identity, rng, 1, rest_first=False))[0]
             found.append(Person(np.asarray(body, np.float64), session_masks(sampler, body, rng)))
+    return sampler, found
+
+
+def test_c_people(count: int, seed: int = 0) -> tuple[RegionSampler, list[Person]]:
+    """The first ``count`` people of the standard build's held-out groups (Test C's people:
+    unknown men, unknown women, children, drawn as the build draws them, taken in turn), each in
+    a pose of its own (not one of the build's), and their sessions."""
+    from training.data.bodies import AnnySource
+    from training.data.presets import PRESETS, TRAINING_GROUPS, groups_of
+
+    source = AnnySource()
+    sampler = RegionSampler(source.template())
+    drawn = []
+    for number, group in enumerate(groups_of(PRESETS["standard"])):
+        if group.name in TRAINING_GROUPS or group.count == 0:
+            continue
+        label = group.name.split("_")[-1]
+        identities = source.body.sample_identities(seed * 100 + number, label, group.name, group.count)
+        drawn.append([(number, index, identity) for index, identity in enumerate(identities)])
+    in_turn = [person for row in zip(*drawn, strict=False) for person in row][:count]  # a man, a woman, a child, …
+    found = []
+    for number, index, identity in in_turn:
+        rng = np.random.default_rng([seed, number, index, SESSION_STREAM])
+        body = source.body.pose(identity, source.body.valid_poses(identity, rng, 1, rest_first=False))[0]
+        found.append(Person(np.asarray(body, np.float64), session_masks(sampler, body, rng)))
     return sampler, found
 
 

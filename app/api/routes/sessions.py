@@ -52,9 +52,10 @@ class SessionOptions(BaseModel):
     registered: bool = Field(
         False,
         description="The views share one coordinate frame and one pose (a tracked scanner's): the union is solved "
-        "once on the views themselves, fused (union_by fused). Otherwise each view may come in its own frame and "
-        "pose, and the union is the learned operator folded over the views' spectra, told what their places on "
-        "the template say (union_by learned-chain).",
+        "once on the views themselves, fused (union_by fused). Otherwise each view may come in its own frame: "
+        "from as many views as the calibration found it closer, the views are brought into one frame through "
+        "their places on the template and fused (aligned); below that, or where they do not come together "
+        "(another pose), the learned operator is folded over the views' spectra (learned-chain).",
     )
     units: Literal["m", "cm", "mm"] = Field("m", description="Units of every view's coordinates.")
     scale: float | None = Field(None, gt=0, description="Factor to metres for the views; overrides units.")
@@ -80,9 +81,10 @@ class SessionResponse(BaseModel):
     views: list[SessionViewAnswer] = Field(description="Its views, in the order they landed.")
     union_by: UnionBy = Field(
         description="What made the union: empty (no view yet), view (one view: its own spectrum, σ 0), fused "
-        "(registered views fused and solved once; σ calibrated on anny sessions by view count), learned-chain "
-        "(the learned operator folded over the views' spectra in the order they landed, told the overlaps their "
-        "places say)."
+        "(registered views fused and solved once; σ calibrated on anny sessions by view count), aligned (views "
+        "in their own frames brought into one through their places on the template, then fused; σ likewise), "
+        "learned-chain (the learned operator folded over the views' spectra in the order they landed, told the "
+        "overlaps their places say)."
     )
     eigenvalues: list[float] = Field(description="Spectrum of the union of the session's views, 1/m².")
     sigma: list[float] = Field(description="Per-eigenvalue standard deviation, 1/m².")
@@ -125,7 +127,7 @@ async def create_session(
     options = options or SessionOptions()
     if models.correspondence is None:
         raise _unplaceable()
-    if options.registered and models.fused is None:
+    if options.registered and models.sessions is None:
         raise ProblemError(
             501, "sessions-unavailable", "Registered sessions unavailable", "these models have no sessions.json"
         )
@@ -211,7 +213,7 @@ async def _answer(
     request: Request, sessions: SessionStore, models: SpectralModels, settings: Settings, session_id: str
 ) -> SessionResponse:
     try:
-        state = await session_state(sessions, models, session_id, request.app.state.solver.fuse)
+        state = await session_state(sessions, models, session_id, request.app.state.solver.session_union)
     except SessionNotFound:
         raise _not_found(session_id) from None
     return _shaped(state, models, settings.session_ttl_seconds)

@@ -1,0 +1,91 @@
+"""One anny session read every way the service can read it, each prefix against its exact union.
+
+Each view is solved and placed as an upload is; registered views are fused as they are; views in
+their own frames are the same views each moved by a random rigid motion (seeded), as an
+untracked scanner would send them, then aligned through their places and fused; the learned
+chain and the elementwise minimum read the views' spectra. Shared by the calibration
+(:mod:`training.sessions.calibrate`) and the card's evaluation.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from app.inference.models import SpectralModels
+from app.sessions.aligned import aligned_spectrum
+from app.sessions.fused import View, fused_spectrum
+from app.sessions.session import SessionView, session_union, session_view
+from training.sessions.scans import K, Person, solved_view, union_spectrum, view_meshes
+
+
+@dataclass(frozen=True)
+class Read:
+    """One session prefix: its length, the truth, and each reading's spectrum and σ (aligned:
+    None where the views did not come together)."""
+
+    views: int
+    truth: np.ndarray
+    elementwise_min: np.ndarray
+    chain: np.ndarray
+    chain_sigma: np.ndarray
+    fused: np.ndarray
+    aligned: np.ndarray | None
+
+
+def session_views(models: SpectralModels, person: Person, faces: np.ndarray, variant: str) -> list[SessionView]:
+    """The person's views solved and placed as uploads are, in scanning order."""
+    views = []
+    for index, mesh in enumerate(view_meshes(person, faces, variant)):
+        solved = solved_view(mesh)
+        placed = models.correspondence.placed(solved.part)
+        views.append(session_view(f"view{index}", solved, placed, []))
+    return views
+
+
+def moved(views: list[SessionView], rng: np.random.Generator) -> list[View]:
+    """Each view's geometry under a random rotation and a translation of about a metre."""
+    out = []
+    for view in views:
+        q = rng.normal(size=4)
+        w, x, y, z = q / np.linalg.norm(q)
+        rotation = np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+            ]
+        )
+        geometry = view.geometry
+        points = geometry.points @ rotation.T + rng.normal(size=3)
+        out.append(View(points, geometry.mass, geometry.boundary, geometry.edges))
+    return out
+
+
+def read_prefixes(
+    models: SpectralModels,
+    person: Person,
+    faces: np.ndarray,
+    views: list[SessionView],
+    lengths: tuple[int, ...],
+    rng: np.random.Generator,
+) -> list[Read]:
+    """Every prefix of the session in ``lengths`` (those it reaches), read every way."""
+    frames = moved(views, rng)
+    found = []
+    for length in lengths:
+        if length > len(views):
+            continue
+        prefix = views[:length]
+        chained = session_union(models, prefix, "learned-chain").estimate
+        found.append(
+            Read(
+                length,
+                union_spectrum(person.body, faces, person.masks[:length]),
+                np.min([view.eigenvalues for view in prefix], axis=0),
+                chained.eigenvalues,
+                chained.sigma,
+                fused_spectrum([view.geometry for view in prefix], K),
+                aligned_spectrum(frames[:length], [view.places for view in prefix], K),
+            )
+        )
+    return found
