@@ -71,7 +71,7 @@ def main() -> None:
             print("|---|---|---|---|")
             for registered in (True, False):
                 added, placed = measure(base, scans, args.views, args.repeats, registered)
-                kind = "registered (fused)" if registered else "unregistered (learned chain)"
+                kind = "registered (fused)" if registered else "unregistered (aligned)"
                 print(f"| {kind} | {added:.0f} ms | {placed:.0f} ms | {added / placed:.2f}× |")
         finally:
             process.terminate()

@@ -28,6 +28,7 @@ ICP_ROUNDS = 30
 POINT_ROUNDS = 10  # the last rounds fit point to point
 MAX_RESIDUAL = 0.25  # of the views' point spacing: a median gap to the union's surface above it is no fit
 NORMAL_NEIGHBOURS = 8
+ICP_POINTS = 1500  # about this many of a view's placed points refine its motion (every n-th)
 OVERLAP_GAP = 1.5  # of the point spacing: a moved point this near the union lies on it
 
 
@@ -65,25 +66,26 @@ def aligned_views(views: list[View], places: list[np.ndarray]) -> list[View] | N
     cannot be brought to the others (see the module docstring). ``places``: each view's points'
     places on the template (n, 3)."""
     order = np.argsort([-float(view.mass.sum()) for view in views], kind="stable")
-    moved: dict[int, np.ndarray] = {int(order[0]): views[order[0]].points}
+    own_normals = [_normals(view.points, cKDTree(view.points)) for view in views]  # turned with each view
+    moved: dict[int, Motion] = {int(order[0]): Motion(np.eye(3), np.zeros(3))}
     waiting = [int(i) for i in order[1:]]
     spacing = float(np.median([_spacing(view.points) for view in views]))
     while waiting:
         joined = sorted(moved)
-        union_points = np.concatenate([moved[i] for i in joined])
+        union_points = np.concatenate([moved[i](views[i].points) for i in joined])
+        normals = np.concatenate([own_normals[i] @ moved[i].rotation.T for i in joined])
         union_places = cKDTree(np.concatenate([places[i] for i in joined]))
         tree = cKDTree(union_points)
-        normals = _normals(union_points, tree)
         pairs = {i: _placed_pairs(union_places, places[i]) for i in waiting}
         for candidate in sorted(waiting, key=lambda i: -int((pairs[i] >= 0).sum())):  # most shared first
             motion = _motion(views[candidate].points, pairs[candidate], union_points, tree, normals, spacing)
             if motion is not None:
-                moved[candidate] = motion(views[candidate].points)
+                moved[candidate] = motion
                 waiting.remove(candidate)
                 break
         else:  # none of the views left comes together with those joined
             return None
-    return [View(moved[i], view.mass, view.boundary, view.edges) for i, view in enumerate(views)]
+    return [View(moved[i](view.points), view.mass, view.boundary, view.edges) for i, view in enumerate(views)]
 
 
 def _motion(
@@ -95,7 +97,8 @@ def _motion(
     if matched.sum() < MIN_PAIRS:
         return None
     motion = trimmed_fit(points[matched], union_points[pairs[matched]])
-    motion, residual = _refined(motion, points[matched], tree, normals, spacing)
+    fitted = points[matched][:: max(1, int(matched.sum()) // ICP_POINTS)]  # a spread-out subset: the cost
+    motion, residual = _refined(motion, fitted, tree, normals, spacing)
     return motion if residual <= MAX_RESIDUAL * spacing else None
 
 
