@@ -19,16 +19,23 @@ class OperandSpectrum(BaseModel):
     eigenvalues: list[float] = Field(description="The operand's own spectrum, 1/m²: send it back as a spectrum.")
 
 
-class UnionResponse(BaseModel):
+class UnionInterval(BaseModel):
+    """A union's spectrum and its 90 % interval, as every answer that holds a union gives them."""
+
     eigenvalues: list[float] = Field(description="Spectrum of the union, 1/m², non-decreasing.")
-    sigma: list[float] = Field(description="Per-eigenvalue standard deviation, calibrated on held-out pairs.")
+    sigma: list[float] = Field(
+        description="Per-eigenvalue standard deviation, 1/m², calibrated on held-out unions (0 for one operand)."
+    )
     lower: list[float] = Field(description="Lower end of the 90 % interval.")
     upper: list[float] = Field(description="Upper end of the 90 % interval.")
+
+
+class UnionResponse(UnionInterval):
     operands: list[OperandSpectrum] = Field(description="Each operand's own spectrum, for caching.")
     union_by: Literal["operand", "learned-chain"] = Field(
         description="What made the union: operand (one operand, returned as is, σ 0) or learned-chain (the learned "
-        "operator folded over the operands' spectra, left to right). A scanning session of registered views is "
-        "solved on the views themselves instead: /v1/sessions."
+        "operator folded over the operands' spectra, left to right). A scanning session's union is read from "
+        "the views themselves where it can be: /v1/sessions."
     )
     model_version: str = MODEL_VERSION_FIELD
     solve_ms: float = Field(description="Eigen-solves of the uploaded files.")

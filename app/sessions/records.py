@@ -28,6 +28,10 @@ class SessionNotFound(LookupError):
 class SessionFull(Exception):
     """The session holds as many views as the service keeps."""
 
+    @classmethod
+    def holding(cls, views: int) -> "SessionFull":
+        return cls(f"the session holds {views} views, as many as this service keeps")
+
 
 @dataclass(frozen=True)
 class SessionMeta:

@@ -143,7 +143,7 @@ class SessionRows:
         with self._transaction() as connection:
             meta = self._live(connection, session_id, lock=True)
             if meta.views >= max_views:
-                raise SessionFull(f"the session holds {meta.views} views, as many as this service keeps")
+                raise SessionFull.holding(meta.views)
             marks = ", ".join("?" * (len(VIEW_COLUMNS) + 2))
             self._run(
                 connection,

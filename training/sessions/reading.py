@@ -10,6 +10,7 @@ chain and the elementwise minimum read the views' spectra. Shared by the calibra
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from app.inference.models import SpectralModels
 from app.sessions.aligned import aligned_spectrum
@@ -46,15 +47,8 @@ def moved(views: list[SessionView], rng: np.random.Generator) -> list[View]:
     """Each view's geometry under a random rotation and a translation of about a metre."""
     out = []
     for view in views:
-        q = rng.normal(size=4)
-        w, x, y, z = q / np.linalg.norm(q)
-        rotation = np.array(
-            [
-                [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-            ]
-        )
+        w, x, y, z = rng.normal(size=4)  # a uniform random rotation: a normal quaternion, normalized
+        rotation = Rotation.from_quat([x, y, z, w]).as_matrix()
         geometry = view.geometry
         points = geometry.points @ rotation.T + rng.normal(size=3)
         out.append(View(points, geometry.mass, geometry.boundary, geometry.edges))

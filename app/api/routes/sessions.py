@@ -26,7 +26,7 @@ from app.api.problems import (
     ProblemError,
     problem_responses,
 )
-from app.api.responses import MODEL_VERSION_FIELD
+from app.api.responses import MODEL_VERSION_FIELD, UnionInterval
 from app.core.config import Settings
 from app.geometry.io import ALLOWED_TYPES, UNIT_TO_METRES, resolve_file_type
 from app.geometry.plausibility import size_warnings
@@ -71,7 +71,7 @@ class SessionViewAnswer(BaseModel):
     warnings: list[str] = Field(description="What its solve or its placing found doubtful.")
 
 
-class SessionResponse(BaseModel):
+class SessionResponse(UnionInterval):
     id: str = Field(description="The session's id.")
     registered: bool = Field(description="Whether its views share one frame and pose (see SessionOptions).")
     scale: float = Field(description="Factor to metres applied to every view's coordinates.")
@@ -86,10 +86,6 @@ class SessionResponse(BaseModel):
         "learned-chain (the learned operator folded over the views' spectra in the order they landed, told the "
         "overlaps their places say)."
     )
-    eigenvalues: list[float] = Field(description="Spectrum of the union of the session's views, 1/m².")
-    sigma: list[float] = Field(description="Per-eigenvalue standard deviation, 1/m².")
-    lower: list[float] = Field(description="Lower end of the 90 % interval.")
-    upper: list[float] = Field(description="Upper end of the 90 % interval.")
     overlaps: list[float] = Field(
         description="learned-chain: each union step's overlap read on the template (empty otherwise)."
     )
@@ -164,7 +160,7 @@ async def add_view(
         raise _unplaceable()
     meta = await _existing(sessions, session_id)
     if meta.views >= settings.session_max_views:  # before the solve: a full session costs nothing
-        raise _full(meta.views)
+        raise _full(SessionFull.holding(meta.views))
     resolved_type = resolve_file_type(file.filename, file_type)
     data = await file.read()
     options = upload_options(settings, models.k, meta.units, meta.scale, boundary=boundary)
@@ -178,7 +174,7 @@ async def add_view(
     except SessionNotFound:
         raise _not_found(session_id) from None
     except SessionFull as exc:
-        raise _full(settings.session_max_views, str(exc)) from None
+        raise _full(exc) from None
     return await _answer(request, sessions, models, settings, session_id)
 
 
@@ -271,10 +267,8 @@ def _not_found(session_id: str) -> ProblemError:
     )
 
 
-def _full(views: int, detail: str | None = None) -> ProblemError:
-    return ProblemError(
-        409, "session-full", "Session full", detail or f"the session holds {views} views, as many as this service keeps"
-    )
+def _full(error: SessionFull) -> ProblemError:
+    return ProblemError(409, "session-full", "Session full", str(error))
 
 
 def _unplaceable() -> ProblemError:
