@@ -5,7 +5,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: run test test-train lint bench dataset train decoder correspondence sessions models
+.PHONY: run test test-train lint bench dataset train decoder correspondence sessions bodies models
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -43,7 +43,10 @@ correspondence: $(BIN)/.train  ## the correspondence model (part → template): 
 sessions: $(BIN)/.train  ## σ of registered sessions' fused unions: anny people scanned as a front-end does, exact unions
 	$(BIN)/spectral-unions-train calibrate-sessions --models models
 
-models: dataset train decoder correspondence sessions  ## everything from scratch: data → training → evaluation → export
+bodies: $(BIN)/.train  ## the body basis sessions are fitted with, its intervals calibrated, bodies and measurements scored
+	$(BIN)/spectral-unions-train fit-bodies --models models
+
+models: dataset train decoder correspondence sessions bodies  ## everything from scratch: data → training → evaluation → export
 
 lint: $(BIN)/.installed
 	$(BIN)/ruff check app training tests benchmarks

@@ -40,6 +40,7 @@ from app.api.routes.models import ModelsResponse
 from app.api.routes.overlap import OverlapResponse
 from app.api.routes.reconstruct import ReconstructResponse
 from app.api.routes.retrieve import RetrieveResponse
+from app.api.routes.session_body import BodyAnswer
 from app.api.routes.sessions import SessionOptions, SessionResponse
 from app.api.routes.shapes import ShapeOut, ShapePage
 from app.api.routes.spectrum import FootprintedReport
@@ -263,6 +264,10 @@ class Client:
     def session(self, session_id: str) -> SessionResponse:
         """A session as it stands: its views, their union and coverage."""
         return SessionResponse(**self._answer(self._http.get(f"/v1/sessions/{session_id}")))
+
+    def session_body(self, session_id: str) -> BodyAnswer:
+        """The body fitted to a session's views, at rest, and the measurements they support."""
+        return BodyAnswer(**self._answer(self._http.get(f"/v1/sessions/{session_id}/body")))
 
     def end_session(self, session_id: str) -> None:
         """End a session: it and its views are deleted."""

@@ -24,6 +24,7 @@ from app.api.routes import (
     overlap,
     reconstruct,
     retrieve,
+    session_body,
     sessions,
     shapes,
     spectrum,
@@ -99,6 +100,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(health.router)
     app.include_router(metrics_router)
     app.include_router(spectrum.router, prefix=API_PREFIX)
-    for routes in (unions, overlap, localize, correspondence, reconstruct, models, retrieve, shapes, sessions):
+    routers = (unions, overlap, localize, correspondence, reconstruct, models, retrieve, shapes, sessions, session_body)
+    for routes in routers:
         app.include_router(routes.router, prefix=API_PREFIX)
     return app

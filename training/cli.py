@@ -212,6 +212,25 @@ def calibrate_sessions_command(
     typer.echo(json.dumps({"methods": content["methods"], "evaluation": content["evaluation"]}, indent=1))
 
 
+@cli.command("fit-bodies")
+def fit_bodies_command(
+    models: ModelsOption = Path("models"),
+    people: Annotated[int, typer.Option(help="Calibration people (scanned as a front-end does).")] = 6,
+    seed: Annotated[int, typer.Option(help="Calibration people's seed.")] = 1,
+    test_c: Annotated[int, typer.Option(help="Test C's people the bodies are scored on (at most 9).")] = 6,
+) -> None:
+    """The body basis sessions are fitted with (the decoder's, posed by anny's skinning per part),
+    its intervals calibrated on anny sessions, its bodies and measurements scored on Test C's
+    people, into the model card."""
+    import json
+
+    from training.sessions.bodies import fit_bodies
+
+    command = f"spectral-unions-train fit-bodies --models {models} --people {people} --seed {seed} --test-c {test_c}"
+    content = fit_bodies(models, people, seed, test_c, command)
+    typer.echo(json.dumps(content["evaluation"], indent=1))
+
+
 def _pipeline(verb: str, data: Path, runs: Path, models: Path, preset: str, seed: int) -> None:
     from training.learning.pipeline import TRAINING_PRESETS, UnfinishedRuns, run_pipeline
 

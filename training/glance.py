@@ -13,6 +13,7 @@ from pathlib import Path
 
 from training.correspondence.card import PLACING_GOAL_MS, worst_served_gap
 from training.learning.card import percent, replace_block
+from training.sessions import body_card
 from training.sessions import card as sessions_card
 
 BEGIN, END = "<!-- glance:begin -->", "<!-- glance:end -->"
@@ -195,6 +196,18 @@ def scanning_session_row(metrics: dict) -> Row:
     )
 
 
+def session_body_row(metrics: dict) -> Row:
+    """The body fitted to a 5-view session, registered and not, against the goal."""
+    rows = metrics["evaluation"]
+    registered, unregistered = rows["5/registered"]["vertex_mm"], rows["5/unregistered"]["vertex_mm"]
+    return (
+        "the body fitted to a 5-view session (Test C people), registered / unregistered (mean vertex error)",
+        f"{registered:.1f} / {unregistered:.1f} mm",
+        f"≤ {body_card.GOAL_BODY_MM:.0f} mm",
+        max(registered, unregistered) <= body_card.GOAL_BODY_MM,
+    )
+
+
 def placing_cost_row(metrics: dict) -> Row:
     """What the evaluation measured placing the sample part cost, on the machine that ran it."""
     cost = metrics["cost"]
@@ -227,6 +240,7 @@ SOURCES: tuple[tuple[str, tuple[Callable[[dict], Row], ...]], ...] = (
     ),
     ("reconstruction.json", (decoder_row,)),
     ("sessions.json", (scanning_session_row,)),
+    ("bodies.json", (session_body_row,)),
 )
 
 

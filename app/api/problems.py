@@ -65,7 +65,10 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
             "the request body was not complete 60 s after its headers (12288 bytes received)",
         )
     ],
-    409: [("session-full", "Session full", "the session holds 32 views, as many as this service keeps")],
+    409: [
+        ("session-full", "Session full", "the session holds 32 views, as many as this service keeps"),
+        ("body-not-fitted", "No body fitted to this session", "120 points: a body needs at least 200 seen"),
+    ],
     413: [("upload-too-large", "Upload too large", "the request body exceeds the cap of 67108864 bytes")],
     415: [
         (
@@ -101,6 +104,7 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
         ("reconstruction-unavailable", "Reconstruction unavailable", "these models have no shape decoder"),
         ("correspondence-unavailable", "Correspondence unavailable", "these models have no correspondence model"),
         ("sessions-unavailable", "Registered sessions unavailable", "these models have no sessions.json"),
+        ("body-unavailable", "Body fitting unavailable", "these models have no body.npz"),
     ],
     503: [
         (

@@ -13,8 +13,9 @@ body is recovered within 2 mm (``docs/decisions/039-the-body-is-fitted-to-the-vi
 Gauss–Newton on the coefficients and the 16 motions, each point's residual down-weighted past
 :data:`ROBUST_M` (places are a few cm off, some far), its template vertex re-chosen every few
 rounds as the posed model's nearest vertex among those within :data:`REPLACE_M` of its place.
-The coefficients' posterior covariance gives each vertex's uncertainty: small where the views
-saw the body, larger where the basis only guesses it.
+The coefficients' posterior covariance gives each vertex's uncertainty: the less the views saw,
+the larger (the basis ties every vertex to every other, so a side unseen is not by itself less
+certain than the side seen).
 """
 
 from dataclasses import dataclass
@@ -41,20 +42,28 @@ class NotEnoughSeen(ValueError):
 
 
 @dataclass(frozen=True)
-class BodyModel:
+class BodyBasis:
     """The shape basis and its skinning: ``mean`` (V, 3) m, ``components`` (C, V, 3) each
     whitened coefficient's displacement (m), ``weights`` (V, P) each vertex's share of each part's
-    motion (rows sum to 1)."""
+    motion (rows sum to 1); and the calibration's factors on the posterior's vertex σ and on the
+    spread of measurements over posterior bodies (1 before calibration)."""
 
     mean: np.ndarray
     components: np.ndarray
     weights: np.ndarray
+    sigma_scale: float = 1.0
+    spread_scale: float = 1.0
 
     @classmethod
-    def load(cls, path: Path) -> "BodyModel":
+    def load(cls, path: Path) -> "BodyBasis":
         data = np.load(path)
+        weights = data["weights"].astype(np.float64)
         return cls(
-            data["mean"].astype(np.float64), data["components"].astype(np.float64), data["weights"].astype(np.float64)
+            data["mean"].astype(np.float64),
+            data["components"].astype(np.float64),
+            weights / weights.sum(axis=1, keepdims=True),  # stored at half precision
+            float(data["sigma_scale"]),
+            float(data["spread_scale"]),
         )
 
     def save(self, path: Path) -> None:
@@ -63,6 +72,8 @@ class BodyModel:
             mean=self.mean.astype(np.float32),
             components=self.components.astype(np.float16),
             weights=self.weights.astype(np.float16),
+            sigma_scale=self.sigma_scale,
+            spread_scale=self.spread_scale,
         )
 
     def rest(self, coefficients: np.ndarray) -> np.ndarray:
@@ -80,24 +91,24 @@ class FittedBody:
     points: int
     residual_m: float
 
-    def vertices(self, model: BodyModel) -> np.ndarray:
+    def vertices(self, model: BodyBasis) -> np.ndarray:
         """(V, 3) the rest-pose body, metres, template vertex order."""
         return model.rest(self.coefficients)
 
-    def vertex_sigma(self, model: BodyModel) -> np.ndarray:
+    def vertex_sigma(self, model: BodyBasis) -> np.ndarray:
         """(V,) each vertex's standard deviation (m, the root of its three coordinates'
         variances) under the coefficients' posterior."""
         flat = model.components.reshape(len(model.components), -1)
         variance = np.einsum("cn,cd,dn->n", flat, self.covariance, flat)
         return np.sqrt(np.maximum(variance.reshape(-1, 3).sum(axis=1), 0.0))
 
-    def samples(self, model: BodyModel, count: int, rng: np.random.Generator) -> np.ndarray:
+    def samples(self, model: BodyBasis, count: int, rng: np.random.Generator) -> np.ndarray:
         """(count, V, 3) rest-pose bodies drawn from the coefficients' posterior."""
         drawn = rng.multivariate_normal(self.coefficients, self.covariance, size=count, method="cholesky")
         return model.rest(drawn)
 
 
-def fit_body(model: BodyModel, points: np.ndarray, places: np.ndarray, template: np.ndarray) -> FittedBody:
+def fit_body(model: BodyBasis, points: np.ndarray, places: np.ndarray, template: np.ndarray) -> FittedBody:
     """The body whose posed surface passes through ``points`` (n, 3) in one frame and pose, each
     point placed at ``places`` (n, 3) on the rest-pose ``template`` (V, 3) vertices."""
     if len(points) < MIN_POINTS:
@@ -116,7 +127,7 @@ class _Fit:
     template vertex each point is taken for."""
 
     def __init__(
-        self, model: BodyModel, points: np.ndarray, places: np.ndarray, template: np.ndarray, nearest: np.ndarray
+        self, model: BodyBasis, points: np.ndarray, places: np.ndarray, template: np.ndarray, nearest: np.ndarray
     ) -> None:
         self.model, self.points, self.places, self.template, self.vertex = model, points, places, template, nearest
         parts = model.weights.shape[1]
@@ -209,9 +220,8 @@ class _Fit:
         components = len(self.coefficients)
         gap = self._residual(self.coefficients, self.rotations, self.translations)[0]
         covariance = np.linalg.inv(self.hessian)[:components, :components]
-        return FittedBody(
-            self.coefficients, (covariance + covariance.T) / 2, len(self.points), float(np.median(np.linalg.norm(gap, axis=1)))
-        )
+        residual = float(np.median(np.linalg.norm(gap, axis=1)))
+        return FittedBody(self.coefficients, (covariance + covariance.T) / 2, len(self.points), residual)
 
 
 def _skew(vectors: np.ndarray) -> np.ndarray:

@@ -97,7 +97,7 @@ def _shoulder_point(template: Template, arm: int, seam: np.ndarray) -> int:
     region = region[across[region] >= start]
     band = np.floor((across[region] - start) / SHOULDER_BAND_M).astype(int)
     top = [region[band == b][np.argmax(vertices[region[band == b], UP])] for b in np.unique(band)]
-    for here, further in zip(top, top[1:]):
+    for here, further in zip(top, top[1:], strict=False):
         rise = vertices[further, UP] - vertices[here, UP]
         if rise < -SHOULDER_SLOPE * (across[further] - across[here]):
             return int(here)
@@ -201,7 +201,9 @@ class Measurer:
     def _arm_length(self, vertices: np.ndarray) -> float:
         """Shoulder point to the wrist's centre through the elbow's, the mean of both arms."""
         lengths = []
-        for shoulder, elbow, wrist in zip(self.landmarks.shoulder, self.landmarks.elbow, self.landmarks.wrist):
+        for shoulder, elbow, wrist in zip(
+            self.landmarks.shoulder, self.landmarks.elbow, self.landmarks.wrist, strict=True
+        ):
             a, b, c = vertices[shoulder], vertices[elbow].mean(axis=0), vertices[wrist].mean(axis=0)
             lengths.append(np.linalg.norm(b - a) + np.linalg.norm(c - b))
         return float(np.mean(lengths))

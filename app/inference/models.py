@@ -16,6 +16,7 @@ import onnxruntime as ort
 from scipy.spatial import cKDTree
 
 from app.contract import (
+    BODY_FILE,
     CORRESPONDENCE_FILE,
     INTERVAL_Z,
     LOCALIZER_FILE,
@@ -33,9 +34,11 @@ from app.contract import (
 )
 from app.core.errors import InputError
 from app.geometry.laplacian import mesh_operators
+from app.inference.bodyfit import BodyBasis
 from app.inference.correspondence import CorrespondenceModel, PlacedPart, TemplateRegions
 from app.inference.cover import Cover
-from app.inference.manifest import verify_manifest
+from app.inference.manifest import OPTIONAL_ARTEFACTS, verify_manifest
+from app.inference.measurements import Measurer
 from app.inference.nesting import NESTED_OVERLAP, Nesting, nested_step
 from app.inference.spectra import InvalidSpectrum
 from app.inference.template import PART_NAMES, Template, localized_region, part_coverage
@@ -194,7 +197,9 @@ class SpectralModels:
         if CORRESPONDENCE_FILE in checked:
             self.correspondence = CorrespondenceModel(directory / CORRESPONDENCE_FILE, self.template_regions, threads)
         self.sessions = SessionCalibration.load(directory / SESSIONS_FILE, self.k) if SESSIONS_FILE in checked else None
-        optional = [name for name in (RECONSTRUCTION_FILE, CORRESPONDENCE_FILE, SESSIONS_FILE) if name in checked]
+        self.body = BodyBasis.load(directory / BODY_FILE) if BODY_FILE in checked else None
+        self.measurer = Measurer.of(self.template) if self.body is not None else None
+        optional = [name for name in OPTIONAL_ARTEFACTS if name in checked]
         served = [UNION_FILE, LOCALIZER_FILE, *optional]
         digest = hashlib.sha256(b"".join((directory / name).read_bytes() for name in served))
         self.version = digest.hexdigest()[:12]  # content hash: two replicas agree iff they serve the same models

@@ -155,6 +155,9 @@ def test_a_session_filled_view_by_view_answers_as_the_union_of_its_views(service
     assert state.union_by == "learned-chain" and [view.source for view in state.views] == [s[0] for s in scans]
     np.testing.assert_allclose(state.eigenvalues, service.union(files=scans).eigenvalues, rtol=1e-9)
     assert service.session(session.id).eigenvalues == state.eigenvalues
+    with pytest.raises(ServiceProblem) as refused:  # two patches of no body do not come together on it
+        service.session_body(session.id)
+    assert refused.value.status == 409 and refused.value.type == "/problems/body-not-fitted"
     service.end_session(session.id)
     with pytest.raises(ServiceProblem) as raised:
         service.session(session.id)

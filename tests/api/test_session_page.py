@@ -257,6 +257,14 @@ def test_a_registered_session_shows_the_union_the_service_s_session_solves(base,
     }
     assert shown == pytest.approx(expected["part_coverage"], abs=1e-4)
     assert shown["right_thigh"] > 0.8 > 0.2 > shown["left_thigh"]
+    # The measurements are those of the body fitted to the same views (the fit is seeded).
+    body = httpx.get(f"{base}/v1/sessions/{session['id']}/body", timeout=60).json()
+    listed = {
+        item.get_attribute("data-name"): float(item.get_attribute("data-value"))
+        for item in browser.find_elements(By.CSS_SELECTOR, "#measurements li")
+    }
+    assert listed == pytest.approx({m["name"]: m["value_m"] for m in body["measurements"]}, rel=1e-9)
+    assert listed and "shoulder breadth" in browser.find_element(By.ID, "measurements-note").text
 
 
 @pytest.fixture(scope="module")

@@ -200,3 +200,34 @@ def test_units_apply_to_every_view(client, template, scans):
 def template_part_in_mm(template: Template) -> bytes:
     scaled = replace(template, vertices=template.vertices * 1000)
     return template_part(scaled, removed(SESSION_SCANS[HEAD_SIDE]))
+
+
+def test_a_session_s_body_is_the_body_its_views_saw_and_measures_what_they_support(client, template, scans):
+    from app.inference.measurements import Measurer
+
+    session = new_session(client, registered=True)["id"]
+    for name in SESSION_SCANS:
+        assert add(client, session, name, scans[name]).status_code == 201
+    answer = client.get(f"/v1/sessions/{session}/body")
+    assert answer.status_code == 200, answer.text
+    body = answer.json()
+    vertices = np.array(body["vertices"])
+    assert vertices.shape == template.vertices.shape and len(body["sigma_m"]) == len(vertices)
+    aligned = vertices - vertices.mean(axis=0) + template.vertices.mean(axis=0)
+    assert np.linalg.norm(aligned - template.vertices, axis=1).mean() < 0.015  # the views are the template's own
+    measured = {m["name"]: m for m in body["measurements"]}
+    truth = Measurer.of(template).measure(template.vertices.astype(np.float64))
+    assert abs(measured["stature"]["value_m"] - truth["stature"]) < 0.02
+    assert all(m["lower_m"] <= m["value_m"] <= m["upper_m"] for m in measured.values())
+    # Head, torso and left arm, then torso, hips and right leg: no right arm, so no shoulder breadth.
+    assert "shoulder_breadth" in body["not_measured"] and "shoulder_breadth" not in measured
+    assert {"crotch_height", "arm_length"} <= set(measured)
+
+
+def test_a_body_needs_views_and_a_session(client):
+    empty = new_session(client, registered=True)["id"]
+    answer = client.get(f"/v1/sessions/{empty}/body")
+    assert answer.status_code == 409 and answer.headers["content-type"] == PROBLEM
+    assert answer.json()["type"].endswith("/body-not-fitted")
+    missing = client.get("/v1/sessions/no-such-session/body")
+    assert missing.status_code == 404 and missing.json()["type"].endswith("/session-not-found")

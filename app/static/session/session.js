@@ -107,8 +107,8 @@ async function removeScan(index) {
 
 // The page as it was before any scan.
 function cleared() {
-  for (const id of ["parts", "warnings", "coverage", "matches", "plot"]) $(id).replaceChildren();
-  for (const id of ["located", "missing", "matches-note", "rebuilt-note"]) $(id).textContent = "";
+  for (const id of ["parts", "warnings", "coverage", "matches", "plot", "measurements"]) $(id).replaceChildren();
+  for (const id of ["located", "missing", "matches-note", "rebuilt-note", "measurements-note"]) $(id).textContent = "";
   covered.clear();
   rebuiltView.clear();
   $("registered").disabled = false;
@@ -141,12 +141,14 @@ async function refresh() {
   };
   $("parts").replaceChildren(...parts.map(item));
   setStatus(`Uniting ${parts.length} part${parts.length > 1 ? "s" : ""}…`);
-  const [region, ply, found, rebuilt] = await Promise.all([
+  const [region, ply, found, rebuilt, body] = await Promise.all([
     fetch("/v1/localize", { method: "POST", body: spectraForm() }).then(answer),
     fetch("/v1/localize?format=ply", { method: "POST", body: spectraForm() }).then((r) => r.arrayBuffer()),
     fetch(`/v1/retrieve?top=${RETRIEVED}`, { method: "POST", body: spectraForm() }).then(answer),
     fetch("/v1/reconstruct?format=ply", { method: "POST", body: spectraForm() }),
+    session ? fetch(`/v1/sessions/${session.id}/body`) : null,
   ]);
+  await showMeasurements(body);
   plot(session ?? region); // a session's union carries its own σ
   document.body.dataset.unionBy = session ? session.union_by : "";
   covered.show(ply);
@@ -304,6 +306,37 @@ function showCoverage(region) {
       return li;
     }),
   );
+}
+
+// The measurements of the body fitted to a registered session's scans, each with its 90 %
+// interval, and those the scans do not support; scans solved one by one have no session to fit.
+async function showMeasurements(response) {
+  const note = $("measurements-note");
+  if (response === null) {
+    $("measurements").replaceChildren();
+    note.textContent = "Measurements come from registered scans: the body is fitted to them in one frame.";
+    return;
+  }
+  let body;
+  try {
+    body = await answer(response);
+  } catch (error) {
+    $("measurements").replaceChildren();
+    note.textContent = error.message;
+    return;
+  }
+  const centimetres = (metres) => (100 * metres).toFixed(1);
+  $("measurements").replaceChildren(
+    ...body.measurements.map((m) => {
+      const li = document.createElement("li");
+      li.textContent = `${m.name.replace("_", " ")}: ${centimetres(m.value_m)} cm (${centimetres(m.lower_m)}–${centimetres(m.upper_m)})`;
+      li.dataset.name = m.name;
+      li.dataset.value = String(m.value_m);
+      return li;
+    }),
+  );
+  const missing = Object.keys(body.not_measured).map((name) => name.replace("_", " "));
+  note.textContent = missing.length ? `Not measured, the scans did not see enough for them: ${missing.join(", ")}.` : "";
 }
 
 function showMatches(found) {

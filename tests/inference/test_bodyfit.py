@@ -1,0 +1,73 @@
+"""The body fit against bodies whose shape and pose are known: drawn from the served basis, posed
+by its own skinning, seen whole or in part."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from app.contract import BODY_FILE
+from app.inference.bodyfit import BodyBasis, NotEnoughSeen, fit_body
+from app.inference.template import PART_NAMES, Template
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+
+
+@pytest.fixture(scope="module")
+def basis() -> BodyBasis:
+    return BodyBasis.load(MODELS / BODY_FILE)
+
+
+@pytest.fixture(scope="module")
+def template() -> Template:
+    return Template.load(MODELS)
+
+
+def posed(basis: BodyBasis, rest: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """``rest`` posed by the basis's skinning: each limb part turned up to 25°, the whole body
+    turned and moved as a scanner's frame would have it."""
+    parts = basis.weights.shape[1]
+    angles = np.zeros((parts, 3))
+    limbs = [i for i, name in enumerate(PART_NAMES) if name.split("_")[-1] in ("arm", "forearm", "thigh", "shin")]
+    angles[limbs] = rng.uniform(-np.radians(25), np.radians(25), size=(len(limbs), 3))
+    rotations = Rotation.from_rotvec(angles).as_matrix()
+    pivots = np.array(
+        [
+            rest[basis.weights[:, b] > 0.5].mean(axis=0) if (basis.weights[:, b] > 0.5).any() else np.zeros(3)
+            for b in range(parts)
+        ]
+    )
+    translations = pivots - np.einsum("bij,bj->bi", rotations, pivots)
+    moved = np.einsum("bij,vj->vbi", rotations, rest) + translations[None]
+    body = np.einsum("vb,vbi->vi", basis.weights, moved)
+    frame = Rotation.from_rotvec(rng.normal(size=3)).as_matrix()
+    return body @ frame.T + rng.normal(size=3)
+
+
+def test_a_posed_body_seen_whole_comes_back_at_rest(basis, template):
+    rng = np.random.default_rng(0)
+    truth = basis.rest(rng.normal(scale=0.8, size=len(basis.components)))
+    seen = rng.choice(len(truth), 3000, replace=False)
+    fitted = fit_body(basis, posed(basis, truth, rng)[seen], template.vertices[seen], template.vertices)
+    error = np.linalg.norm(fitted.vertices(basis) - truth, axis=1)
+    assert error.mean() < 0.002  # far below the 20–90 mm that separate one person from another
+    assert fitted.residual_m < 0.002
+
+
+def test_a_body_seen_in_part_is_less_certain_than_seen_whole(basis, template):
+    rng = np.random.default_rng(1)
+    truth = basis.rest(rng.normal(scale=0.8, size=len(basis.components)))
+    body = posed(basis, truth, rng)
+    front = np.flatnonzero(template.vertices[:, 1] < np.median(template.vertices[:, 1]))  # −y is the body's front
+    whole = rng.choice(len(truth), 4000, replace=False)
+    half = rng.choice(front, 2000, replace=False)
+    fits = [fit_body(basis, body[seen], template.vertices[seen], template.vertices) for seen in (whole, half)]
+    sigma_whole, sigma_half = (fit.vertex_sigma(basis) for fit in fits)
+    assert np.median(sigma_half / sigma_whole) > 1.2
+    assert np.linalg.norm(fits[1].vertices(basis) - truth, axis=1)[front].mean() < 0.015  # people differ by 20–90 mm
+
+
+def test_too_few_points_are_refused(basis, template):
+    with pytest.raises(NotEnoughSeen):
+        fit_body(basis, template.vertices[:50], template.vertices[:50], template.vertices)
