@@ -90,6 +90,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         byte_budget=settings.max_inflight_upload_bytes,
         max_body_bytes=settings.max_upload_bytes,
         solving_paths=frozenset({API_PREFIX + reconstruct.ROUTE, API_PREFIX + retrieve.ROUTE}),
+        solving_suffixes=(session_body.BODY, session_body.IDENTITY),
     )
     app.add_middleware(
         UploadLimitMiddleware, max_bytes=settings.max_upload_bytes, body_timeout_s=settings.body_timeout_seconds

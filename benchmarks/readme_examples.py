@@ -87,7 +87,14 @@ def first_of_list(output: str) -> str:
     return shown({**page, "shapes": page["shapes"][:1]})[:-2] + ", …]}"
 
 
-PER_VERTEX_SHOWN = {"vertex_indices": 3, "template_vertex": 3, "position": 3, "confidence": 3, "vertex_confidence": 5}
+PER_VERTEX_SHOWN = {
+    "vertex_indices": 3,
+    "template_vertex": 3,
+    "position": 3,
+    "confidence": 3,
+    "vertex_confidence": 5,
+    "sigma_m": 3,
+}
 
 
 def cut_tokens(body: dict) -> dict:
@@ -167,6 +174,18 @@ def examples(overlap: float) -> list[Example]:
             f"curl -s -F file=@torso_hips_right_leg.ply {view_route}", fields(*session_fields), "session_view", True
         ),
         Example(f"curl -s {URL}/v1/sessions/$(jq -r .id session.json)", fields("union_by", "views", "eigenvalues")),
+        Example(
+            f"curl -s {URL}/v1/sessions/$(jq -r .id session.json)/body",
+            fields("views", "residual_m", "vertices", "sigma_m", "measurements", "not_measured"),
+            "session_body",
+            True,
+        ),
+        Example(
+            f"curl -s '{URL}/v1/sessions/$(jq -r .id session.json)/identity?top=3'",
+            fields("ranked_by", "people", "warnings"),
+            "session_identity",
+            True,
+        ),
         Example(f"curl -s {status} -X DELETE {URL}/v1/sessions/$(jq -r .id session.json)", as_text),
         Example(f"curl -s {URL}/v1/models", record="models"),
         Example(f"curl -s {URL}/healthz"),

@@ -18,8 +18,9 @@ as places remain: a union of 32 files held one place and queued 32 solves, and a
 it waited 12 s; now it holds every place it can, and the uploads after it are refused at once.
 An admitted request is never refused for its own size.
 A route that solves a shape of its own whatever its body holds (``/v1/reconstruct`` checks the
-body it rebuilt) is counted in the same way on any body, URL-encoded spectra included, so that
-no request reaches the solvers' queue uncounted.
+body it rebuilt; a session's ``/body`` and ``/identity`` fit a body) is counted in the same way
+on any body, URL-encoded spectra included, so that no request reaches the solvers' queue
+uncounted.
 """
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -63,19 +64,25 @@ class AdmissionMiddleware:
         byte_budget: int,
         max_body_bytes: int,
         solving_paths: frozenset[str] = frozenset(),
+        solving_suffixes: tuple[str, ...] = (),
     ) -> None:
         self.app = app
         self.solving_paths = solving_paths
+        self.solving_suffixes = solving_suffixes  # paths with an id in them: a session's fitted body
         self.capacity = capacity
         self.byte_budget = byte_budget
         self.max_body_bytes = max_body_bytes
         self.places = 0
         self.bytes = 0
 
+    def _solves(self, path: str) -> bool:
+        """Whether a request without an upload still solves (a decoded or fitted body)."""
+        return path in self.solving_paths or (bool(self.solving_suffixes) and path.endswith(self.solving_suffixes))
+
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         headers = dict(scope["headers"]) if scope["type"] == "http" else {}
         multipart = headers.get(b"content-type", b"").lower().startswith(b"multipart/form-data")
-        if not (multipart or (scope["type"] == "http" and scope["path"] in self.solving_paths)):
+        if not (multipart or (scope["type"] == "http" and self._solves(scope["path"]))):
             await self.app(scope, receive, send)
             return
         charge = min(_declared_length(headers, self.max_body_bytes), RESERVATION_BYTES)

@@ -6,7 +6,7 @@ workers as an upload, so both routes are admitted like uploads (``app.main``).
 """
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import anyio
@@ -16,9 +16,13 @@ from fastapi import Request
 
 from app.api.metrics import INFERENCE
 from app.api.solver import SolverPool
+from app.api.unions import UnionOutcome
 from app.geometry.pipeline import SpectrumOptions
 from app.inference.body import open_surface, spectrum_gap
+from app.inference.bodyfit import NotEnoughSeen
 from app.inference.models import SpectralModels, UnionEstimate
+from app.sessions.body import NoBodyFits, fitted_views
+from app.sessions.fused import view_of_part
 
 # The rebuilt body's spectrum is within ~2 % of a complete body's and ~5 % of a two-part union's
 # on average (model card); a union of scans that leave part of the body unseen is ~80 % away.
@@ -34,7 +38,8 @@ OPEN_GAP_WARNING = 0.60
 # than 70 % covered: 46–76 %). Over this the union leaves part of the body unseen.
 PREDICTED_OPEN_GAP_WARNING = 0.25
 
-RoundTrip = Literal["closed", "open", "unseen"]
+RoundTrip = Literal["closed", "open", "unseen", "fitted"]  # fitted: no round trip, the body fits the uploads' points
+BodyBy = Literal["fitted", "decoded"]
 
 
 def round_trip(gap: float, union: UnionEstimate) -> RoundTrip:
@@ -53,13 +58,16 @@ def round_trip(gap: float, union: UnionEstimate) -> RoundTrip:
 @dataclass(frozen=True)
 class RebuiltBody:
     """A rebuilt body: rest-pose vertices (m, template order), its PLY, its own spectrum (1/m²), the
-    mean relative gap of λ₂…λ_k to the union's, and the round trip's verdict."""
+    mean relative gap of λ₂…λ_k to the union's, the round trip's verdict, how it was made, and
+    why it was not fitted where it could have been."""
 
     vertices: np.ndarray
     mesh: bytes
     eigenvalues: np.ndarray
     gap: float
     verdict: RoundTrip
+    by: BodyBy = "decoded"
+    not_fitted: str | None = None
 
 
 def body_mesh(models: SpectralModels, vertices: np.ndarray) -> bytes:
@@ -73,9 +81,40 @@ async def rebuilt_body(request: Request, models: SpectralModels, union: UnionEst
     started = time.perf_counter()
     vertices = await anyio.to_thread.run_sync(models.reconstruct, union.eigenvalues, union.sigma)
     INFERENCE.labels("decoder").observe(time.perf_counter() - started)
+    mesh, eigenvalues = await _solved(request, models, vertices)
+    gap = spectrum_gap(eigenvalues, union.eigenvalues)
+    return RebuiltBody(vertices, mesh, eigenvalues, gap, round_trip(gap, union))
+
+
+async def scanned_body(request: Request, models: SpectralModels, outcome: UnionOutcome) -> RebuiltBody:
+    """The body of the person the operands were scanned from: fitted to the uploads' points where
+    every operand is an upload placed on the template and a body fits them (decision 039: 5 views
+    ~10 mm where their union's spectrum decodes to ~75); else decoded from the union (the models
+    must then have a decoder)."""
+    uploads = [operand.part for operand in outcome.operands]
+    if models.body is None or not outcome.placed or len(outcome.placed) != len(uploads) or None in uploads:
+        return await rebuilt_body(request, models, outcome.result)
+    geometry = [view_of_part(part) for part in uploads if part is not None]
+    places = [placed.placement.position for placed in outcome.placed]
+    try:
+        fitted = await anyio.to_thread.run_sync(
+            fitted_views, models.body, models.template.vertices, geometry, places, False
+        )
+    except (NotEnoughSeen, NoBodyFits) as exc:
+        if models.decoder_session is None:
+            raise
+        decoded = await rebuilt_body(request, models, outcome.result)
+        return replace(decoded, not_fitted=str(exc))
+    vertices = fitted.vertices(models.body)
+    mesh, eigenvalues = await _solved(request, models, vertices)
+    return RebuiltBody(
+        vertices, mesh, eigenvalues, spectrum_gap(eigenvalues, outcome.result.eigenvalues), "fitted", "fitted"
+    )
+
+
+async def _solved(request: Request, models: SpectralModels, vertices: np.ndarray) -> tuple[bytes, np.ndarray]:
+    """A body's PLY and its own spectrum, solved on the solver pool."""
     mesh = await anyio.to_thread.run_sync(body_mesh, models, vertices)
     solver: SolverPool = request.app.state.solver
     report = await solver.solve(mesh, "ply", SpectrumOptions(k=models.k))
-    eigenvalues = np.asarray(report.eigenvalues, dtype=np.float64)
-    gap = spectrum_gap(eigenvalues, union.eigenvalues)
-    return RebuiltBody(vertices, mesh, eigenvalues, gap, round_trip(gap, union))
+    return mesh, np.asarray(report.eigenvalues, dtype=np.float64)

@@ -45,14 +45,16 @@ class NotEnoughSeen(ValueError):
 class BodyBasis:
     """The shape basis and its skinning: ``mean`` (V, 3) m, ``components`` (C, V, 3) each
     whitened coefficient's displacement (m), ``weights`` (V, P) each vertex's share of each part's
-    motion (rows sum to 1); and the calibration's factors on the posterior's vertex σ and on the
-    spread of measurements over posterior bodies (1 before calibration)."""
+    motion (rows sum to 1); and what the calibration found (1 before it): the factors on the
+    posterior's vertex σ and on the spread of measurements over posterior bodies, and the
+    distance scale τ of an identity's confidence (:mod:`app.sessions.identity`)."""
 
     mean: np.ndarray
     components: np.ndarray
     weights: np.ndarray
     sigma_scale: float = 1.0
     spread_scale: float = 1.0
+    identity_scale: float = 1.0
 
     @classmethod
     def load(cls, path: Path) -> "BodyBasis":
@@ -64,6 +66,7 @@ class BodyBasis:
             weights / weights.sum(axis=1, keepdims=True),  # stored at half precision
             float(data["sigma_scale"]),
             float(data["spread_scale"]),
+            float(data["identity_scale"]),
         )
 
     def save(self, path: Path) -> None:
@@ -74,6 +77,7 @@ class BodyBasis:
             weights=self.weights.astype(np.float16),
             sigma_scale=self.sigma_scale,
             spread_scale=self.spread_scale,
+            identity_scale=self.identity_scale,
         )
 
     def rest(self, coefficients: np.ndarray) -> np.ndarray:
@@ -108,13 +112,17 @@ class FittedBody:
         return model.rest(drawn)
 
 
-def fit_body(model: BodyBasis, points: np.ndarray, places: np.ndarray, template: np.ndarray) -> FittedBody:
-    """The body whose posed surface passes through ``points`` (n, 3) in one frame and pose, each
-    point placed at ``places`` (n, 3) on the rest-pose ``template`` (V, 3) vertices."""
+def fit_body(
+    model: BodyBasis, points: np.ndarray, places: np.ndarray, template: np.ndarray, poses: np.ndarray | None = None
+) -> FittedBody:
+    """The body whose posed surface passes through ``points`` (n, 3), each placed at ``places``
+    (n, 3) on the rest-pose ``template`` (V, 3) vertices. ``poses`` (n,) numbers the pose and frame
+    each point was seen in (views in poses or frames of their own: one shape, a pose each); None:
+    all in one."""
     if len(points) < MIN_POINTS:
         raise NotEnoughSeen(f"{len(points)} points: a body needs at least {MIN_POINTS} seen")
-    nearest = cKDTree(template).query(places)[1]
-    fit = _Fit(model, points, places, template, nearest)
+    poses = np.zeros(len(points), np.int64) if poses is None else np.unique(poses, return_inverse=True)[1]
+    fit = _Fit(model, points, places, template, poses)
     for round_ in range(ROUNDS):
         fit.step()
         if round_ >= REPLACE_FROM and round_ % REPLACE_EVERY == 0:
@@ -123,26 +131,24 @@ def fit_body(model: BodyBasis, points: np.ndarray, places: np.ndarray, template:
 
 
 class _Fit:
-    """The Gauss–Newton state: coefficients, each part's rotation and translation, and which
-    template vertex each point is taken for."""
+    """The Levenberg–Marquardt state: coefficients, each pose's rotation and translation of each
+    part, and which template vertex each point is taken for."""
 
     def __init__(
-        self, model: BodyBasis, points: np.ndarray, places: np.ndarray, template: np.ndarray, nearest: np.ndarray
+        self, model: BodyBasis, points: np.ndarray, places: np.ndarray, template: np.ndarray, poses: np.ndarray
     ) -> None:
-        self.model, self.points, self.places, self.template, self.vertex = model, points, places, template, nearest
-        parts = model.weights.shape[1]
+        self.model, self.points, self.places, self.template, self.pose = model, points, places, template, poses
+        self.vertex = cKDTree(template).query(places)[1]
+        self.parts, count = model.weights.shape[1], int(poses.max()) + 1
         self.coefficients = np.zeros(len(model.components))
-        start = rigid_fit(model.mean[nearest], points)  # every part moved as the whole body is
-        self.rotations = np.tile(start.rotation, (parts, 1, 1))
-        self.translations = np.tile(start.translation, (parts, 1))
-        self.hessian = np.eye(len(self.coefficients) + 6 * parts)
+        self.rotations = np.zeros((count, self.parts, 3, 3))
+        self.translations = np.zeros((count, self.parts, 3))
+        for pose in range(count):  # every part of a pose moved as its points' whole body is
+            seen = poses == pose
+            start = rigid_fit(model.mean[self.vertex[seen]], points[seen])
+            self.rotations[pose], self.translations[pose] = start.rotation, start.translation
+        self.hessian = np.eye(len(self.coefficients) + 6 * self.rotations.shape[0] * self.parts)
         self.damping = MIN_DAMPING
-
-    def posed(self, vertices: np.ndarray, rest: np.ndarray) -> np.ndarray:
-        """(n, 3) the posed positions of template ``vertices`` whose rest positions are ``rest``."""
-        weights = self.model.weights[vertices]
-        moved = np.einsum("bij,nj->nbi", self.rotations, rest)
-        return np.einsum("nb,nbi->ni", weights, moved) + weights @ self.translations
 
     def cost(self, coefficients: np.ndarray, rotations: np.ndarray, translations: np.ndarray) -> float:
         """The robust (Cauchy) misfit of the points plus the coefficients' prior."""
@@ -154,50 +160,49 @@ class _Fit:
         self, coefficients: np.ndarray, rotations: np.ndarray, translations: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """(n, 3) each point's posed vertex minus the point, and (n, P, 3) its rest position under
-        each part's rotation."""
+        each part's rotation in its pose."""
         weights = self.model.weights[self.vertex]
-        moved = np.einsum("bij,nj->nbi", rotations, self.model.rest(coefficients)[self.vertex])
-        return np.einsum("nb,nbi->ni", weights, moved) + weights @ translations - self.points, moved
+        rest = self.model.rest(coefficients)[self.vertex]
+        moved = np.einsum("nbij,nj->nbi", rotations[self.pose], rest)
+        posed = np.einsum("nb,nbi->ni", weights, moved) + np.einsum("nb,nbi->ni", weights, translations[self.pose])
+        return posed - self.points, moved
 
     def step(self) -> None:
         """One Levenberg–Marquardt step on the reweighted least squares: damped until the robust
         cost goes down (a full Gauss–Newton step can swing a part far off a child's points)."""
         model, vertex, count = self.model, self.vertex, len(self.points)
-        components = len(self.coefficients)
-        parts = model.weights.shape[1]
+        components, parts, poses = len(self.coefficients), self.parts, self.rotations.shape[0]
         weights = model.weights[vertex]
         residual, moved = self._residual(self.coefficients, self.rotations, self.translations)
         robust = 1.0 / (1.0 + (np.linalg.norm(residual, axis=1) / ROBUST_M) ** 2)
-        jacobian = np.zeros((count, 3, components + 6 * parts))
+        jacobian = np.zeros((count, 3, components + 6 * poses * parts))
         jacobian[:, :, :components] = np.einsum(
-            "nb,bij,cnj->nic", weights, self.rotations, model.components[:, vertex, :]
+            "nb,nbij,cnj->nic", weights, self.rotations[self.pose], model.components[:, vertex, :]
         )
         for part in range(parts):
             share = np.flatnonzero(weights[:, part] > 0)
             if len(share) == 0:
                 continue
             w = weights[share, part, None, None]
-            column = components + 6 * part
-            jacobian[share, :, column : column + 3] = -w * _skew(moved[share, part])
-            jacobian[share, :, column + 3 : column + 6] = w * np.eye(3)
+            column = components + 6 * (self.pose[share] * parts + part)
+            rows = np.arange(3)[None, :, None]
+            jacobian[share[:, None, None], rows, column[:, None, None] + np.arange(3)] = -w * _skew(moved[share, part])
+            jacobian[share[:, None, None], rows, column[:, None, None] + 3 + np.arange(3)] = w * np.eye(3)
         scale = (np.sqrt(robust) / NOISE_M)[:, None, None]
         rows = (jacobian * scale).reshape(-1, jacobian.shape[2])
         hessian = rows.T @ rows
         gradient = rows.T @ (residual * scale[:, :, 0]).ravel()
         hessian[:components, :components] += np.eye(components)  # the coefficients' unit prior
         gradient[:components] += self.coefficients
-        hessian[components:, components:] += MOTION_DAMPING * np.eye(6 * parts)
+        hessian[components:, components:] += MOTION_DAMPING * np.eye(6 * poses * parts)
         self.hessian = hessian
         before = self.cost(self.coefficients, self.rotations, self.translations)
         for _ in range(MAX_DAMPINGS):
             damped = hessian + self.damping * np.diag(np.diag(hessian))
             delta = -np.linalg.solve(damped, gradient)
-            motion = delta[components:].reshape(parts, 6)
-            trial = (
-                self.coefficients + delta[:components],
-                Rotation.from_rotvec(motion[:, :3]).as_matrix() @ self.rotations,
-                self.translations + motion[:, 3:],
-            )
+            motion = delta[components:].reshape(poses, parts, 6)
+            turn = Rotation.from_rotvec(motion[..., :3].reshape(-1, 3)).as_matrix().reshape(poses, parts, 3, 3)
+            trial = (self.coefficients + delta[:components], turn @ self.rotations, self.translations + motion[..., 3:])
             if self.cost(*trial) < before:
                 self.coefficients, self.rotations, self.translations = trial
                 self.damping = max(self.damping / 3, MIN_DAMPING)
@@ -205,16 +210,20 @@ class _Fit:
             self.damping *= 10
 
     def replace(self) -> None:
-        """Each point taken for the posed body's nearest vertex among those placed within
+        """Each point taken for its pose's posed body's nearest vertex among those placed within
         REPLACE_M of its place (kept where none is)."""
-        everything = np.arange(len(self.template))
-        posed = self.posed(everything, self.model.rest(self.coefficients))
-        distance, candidates = cKDTree(posed).query(self.points, k=8)
-        near_place = np.linalg.norm(self.template[candidates] - self.places[:, None], axis=2) < REPLACE_M
-        distance = np.where(near_place, distance, np.inf)
-        found = np.isfinite(distance.min(axis=1))
-        best = candidates[np.arange(len(self.points)), distance.argmin(axis=1)]
-        self.vertex = np.where(found, best, self.vertex)
+        rest = self.model.rest(self.coefficients)
+        weights = self.model.weights
+        for pose in range(self.rotations.shape[0]):
+            seen = np.flatnonzero(self.pose == pose)
+            moved = np.einsum("bij,vj->vbi", self.rotations[pose], rest)
+            posed = np.einsum("vb,vbi->vi", weights, moved) + weights @ self.translations[pose]
+            distance, candidates = cKDTree(posed).query(self.points[seen], k=8)
+            near = np.linalg.norm(self.template[candidates] - self.places[seen, None], axis=2) < REPLACE_M
+            distance = np.where(near, distance, np.inf)
+            found = np.isfinite(distance.min(axis=1))
+            best = candidates[np.arange(len(seen)), distance.argmin(axis=1)]
+            self.vertex[seen] = np.where(found, best, self.vertex[seen])
 
     def result(self) -> FittedBody:
         components = len(self.coefficients)

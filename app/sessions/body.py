@@ -1,9 +1,10 @@
 """A session's body: the rest-pose body fitted to its views' points and places, and its measurements.
 
-The views must stand in one frame and one pose: registered views as they came, views in their
-own frames once aligned (:func:`app.sessions.aligned.aligned_views`). A spread of the views'
-points, drawn by area so that the fine mesh of a face or a hand does not outweigh the back, is
-fitted (:func:`app.inference.bodyfit.fit_body`); the measurements are taken on the fitted body,
+Registered views are fitted in one frame and pose as they came; views in their own frames once
+aligned (:func:`app.sessions.aligned.aligned_views`), or, where they do not come together (the
+person moved between them), each in a pose and frame of its own, one shape for all. A spread of
+the views' points, drawn by area so that the fine mesh of a face or a hand does not outweigh the
+back, is fitted (:func:`app.inference.bodyfit.fit_body`); the measurements are taken on the fitted body,
 each with an interval from bodies drawn from the fit's posterior (scaled as the calibration on
 anny sessions found), and only where the session saw the parts a measurement rests on.
 """
@@ -16,16 +17,20 @@ from app.contract import INTERVAL_Z
 from app.inference.bodyfit import BodyBasis, FittedBody, fit_body
 from app.inference.measurements import MEASUREMENTS, Measurer, supported
 from app.sessions.aligned import aligned_views
+from app.sessions.fused import View
 from app.sessions.session import SessionView
 
 FIT_POINTS = 4000  # the points a fit reads: its cost, about 3 s on one core
+MAX_POSES = 8  # views fitted each in a pose of its own, at most: each adds 96 unknowns to the fit
+MAX_RESIDUAL_M = 0.02  # a fit whose points stay further from it at the median is no body (sessions: 2–8 mm)
 SAMPLES = 16  # posterior bodies an interval is read from
 SEEN = 0.3  # a body part whose covered share is below this was not seen enough to measure on
 SEED = 0  # the draws are fixed: one session, one answer
 
 
-class NotInOneFrame(ValueError):
-    """Views in their own frames that could not be brought together."""
+class NoBodyFits(ValueError):
+    """Views that no body fits: in their own frames, not brought together and too many to fit
+    apart, or too far from the best body."""
 
 
 @dataclass(frozen=True)
@@ -48,21 +53,43 @@ class SessionBody:
     fitted: FittedBody
 
 
-def fitted_points(views: list[SessionView], registered: bool) -> tuple[np.ndarray, np.ndarray]:
-    """(n, 3) points in one frame and their (n, 3) places, up to FIT_POINTS drawn by area."""
-    geometry = [view.geometry for view in views]
-    if not registered and len(views) > 1:
-        moved = aligned_views(geometry, [view.places for view in views])
-        if moved is None:
-            raise NotInOneFrame("the views could not be brought into one frame through their places")
-        geometry = moved
-    points = np.concatenate([g.points for g in geometry])
-    places = np.concatenate([view.places for view in views])
-    mass = np.concatenate([g.mass for g in geometry])
+def fitted_views(
+    basis: BodyBasis, template: np.ndarray, geometry: list[View], places: list[np.ndarray], registered: bool
+) -> FittedBody:
+    """The body fitted to views (their geometry and each point's place on the rest-pose
+    ``template``): ``registered``, in one frame and pose as they came; otherwise brought into one
+    frame through their places where they come together, else each fitted in a pose and frame of
+    its own (up to MAX_POSES views). A spread of FIT_POINTS of their points, drawn by area."""
+    poses = None
+    if not registered and len(geometry) > 1:
+        moved = aligned_views(geometry, places)
+        if moved is not None:
+            geometry = moved
+        elif len(geometry) <= MAX_POSES:
+            poses = np.concatenate([np.full(len(view.points), number) for number, view in enumerate(geometry)])
+        else:
+            raise NoBodyFits(
+                f"the views could not be brought into one frame through their places, and more than {MAX_POSES} "
+                "cannot each be fitted in a pose of their own"
+            )
+    points = np.concatenate([view.points for view in geometry])
+    placed = np.concatenate(places)
+    mass = np.concatenate([view.mass for view in geometry])
+    chosen = np.arange(len(points))
     if len(points) > FIT_POINTS:
         chosen = np.random.default_rng(SEED).choice(len(points), FIT_POINTS, replace=False, p=mass / mass.sum())
-        points, places = points[chosen], places[chosen]
-    return points, places
+    fitted = fit_body(basis, points[chosen], placed[chosen], template, None if poses is None else poses[chosen])
+    if fitted.residual_m > MAX_RESIDUAL_M:
+        raise NoBodyFits(
+            f"the views do not fit a body: their points stay {1000 * fitted.residual_m:.0f} mm from the best one "
+            f"at the median (at most {1000 * MAX_RESIDUAL_M:.0f})"
+        )
+    return fitted
+
+
+def fitted_session(basis: BodyBasis, template: np.ndarray, views: list[SessionView], registered: bool) -> FittedBody:
+    """The body fitted to the session's views (``template``: the rest-pose template's vertices)."""
+    return fitted_views(basis, template, [view.geometry for view in views], [view.places for view in views], registered)
 
 
 def session_body(
@@ -73,8 +100,7 @@ def session_body(
     coverage: dict[str, float],
 ) -> SessionBody:
     """The session's body and measurements; ``coverage``: each body part's covered share."""
-    points, places = fitted_points(views, registered)
-    fitted = fit_body(basis, points, places, measurer.template.vertices)
+    fitted = fitted_session(basis, measurer.template.vertices, views, registered)
     vertices = fitted.vertices(basis)
     values = measurer.measure(vertices)
     drawn = [measurer.measure(body) for body in fitted.samples(basis, SAMPLES, np.random.default_rng(SEED))]

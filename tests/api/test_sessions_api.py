@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import trimesh
 from fastapi.testclient import TestClient
 from scipy.spatial.transform import Rotation
 
@@ -17,7 +18,7 @@ from app.inference.template import PART_NAMES, Template
 from app.main import create_app
 from app.samples import SESSION_SCANS, template_part
 from app.sessions.calibration import SessionCalibration
-from tests.api.conftest import settings_for
+from tests.api.conftest import API_KEY, settings_for
 from tests.api.test_union_api import PROBLEM, region
 
 HEAD_SIDE, LEG_SIDE = SESSION_SCANS  # head, torso and left arm; torso, hips and right leg
@@ -231,3 +232,28 @@ def test_a_body_needs_views_and_a_session(client):
     assert answer.json()["type"].endswith("/body-not-fitted")
     missing = client.get("/v1/sessions/no-such-session/body")
     assert missing.status_code == 404 and missing.json()["type"].endswith("/session-not-found")
+
+
+def test_scans_cut_from_a_stored_body_find_that_body_first(client, template, scans):
+    """The template body stored as a person beside the seed database's 630 shapes; a registered
+    session of three scans cut from it answers that person first, once, with the most confidence."""
+    whole = trimesh.Trimesh(template.vertices, template.faces, process=False).export(file_type="ply")
+    stored = client.post(
+        "/v1/shapes",
+        data={"label": "scanned-person"},
+        files={"file": ("whole.ply", whole)},
+        headers={"X-API-Key": API_KEY},
+    )
+    assert stored.status_code == 201, stored.text
+    session = new_session(client, registered=True)["id"]
+    for name in (*SESSION_SCANS, "torso_hips_left_leg.ply"):
+        assert add(client, session, name, scans[name]).status_code == 201
+    answer = client.get(f"/v1/sessions/{session}/identity", params={"top": 5})
+    assert answer.status_code == 200, answer.text
+    found = answer.json()
+    assert found["ranked_by"] == "fitted_body" and found["views"] == 3
+    people = found["people"]
+    assert people[0]["label"] == "scanned-person" and people[0]["shape_id"] == stored.json()["id"]
+    assert len({p["label"] for p in people}) == len(people) == 5  # one answer per person
+    confidences = [p["confidence"] for p in people]
+    assert confidences == sorted(confidences, reverse=True) and sum(confidences) <= 1 + 1e-9

@@ -71,3 +71,22 @@ def test_a_body_seen_in_part_is_less_certain_than_seen_whole(basis, template):
 def test_too_few_points_are_refused(basis, template):
     with pytest.raises(NotEnoughSeen):
         fit_body(basis, template.vertices[:50], template.vertices[:50], template.vertices)
+
+
+def test_one_body_seen_in_two_poses_comes_back_once(basis, template):
+    rng = np.random.default_rng(2)
+    truth = basis.rest(rng.normal(scale=0.8, size=len(basis.components)))
+    first, second = posed(basis, truth, rng), posed(basis, truth, rng)  # two poses, two frames
+    front = template.vertices[:, 1] < np.median(template.vertices[:, 1])
+    seen = [
+        rng.choice(np.flatnonzero(front), 2000, replace=False),
+        rng.choice(np.flatnonzero(~front), 2000, replace=False),
+    ]
+    points = np.concatenate([first[seen[0]], second[seen[1]]])
+    places = template.vertices[np.concatenate(seen)]
+    poses = np.repeat([0, 1], 2000)
+    apart = fit_body(basis, points, places, template.vertices, poses)
+    error = np.linalg.norm(apart.vertices(basis) - truth, axis=1).mean()
+    assert error < 0.005
+    as_one = fit_body(basis, points, places, template.vertices)  # read as one pose, the two halves disagree
+    assert np.linalg.norm(as_one.vertices(basis) - truth, axis=1).mean() > 2 * error

@@ -22,17 +22,21 @@ from app.inference.bodyfit import BodyBasis
 from app.inference.manifest import write_manifest
 from app.inference.measurements import MEASUREMENTS, Measurer
 from app.inference.models import SpectralModels
-from app.sessions.body import NotInOneFrame, SessionBody, session_body
-from app.sessions.session import SessionView, session_cover
+from app.sessions.body import NoBodyFits, SessionBody, session_body
+from app.sessions.fused import fused_spectrum
+from app.sessions.identity import SHAPES_PER_PERSON, ranked_people
+from app.sessions.session import SessionView, session_cover, session_union
 from training.glance import CARD, update_glance
 from training.learning.card import replace_block
 from training.reconstruction.evaluate import rigidly_aligned
 from training.reconstruction.export import decoder_basis
 from training.sessions.body_card import BEGIN, END, render
+from training.sessions.identities import Gallery, closed_spectrum, fitted_scale, rank_of
 from training.sessions.reading import moved, session_views
 from training.sessions.scans import VARIANTS, Person, people, test_c_people
 
 LENGTHS = (3, 5, 12, 24)
+ANSWERED = 5  # people an identity answers (its top)
 UNREGISTERED_LENGTH = 5  # views in their own frames, aligned first: scored at this length
 BODIES_METRICS = "bodies.json"
 FRAMES_STREAM = 13  # the random frames unregistered views are sent in
@@ -81,22 +85,31 @@ def _scores(body: SessionBody, person: Person, measurer: Measurer, basis: BodyBa
     }
 
 
-def _sessions(served: SpectralModels, basis: BodyBasis, found: list[Person], variants: tuple[str, ...]) -> list[dict]:
+def _sessions(
+    served: SpectralModels, basis: BodyBasis, found: list[Person], variants: tuple[str, ...], gallery: Gallery
+) -> list[dict]:
     """Every person's session prefixes fitted (registered at each length, in their own frames at
-    UNREGISTERED_LENGTH), scored; a session whose views did not come together is counted, not
-    scored."""
+    UNREGISTERED_LENGTH), scored, and ranked against ``gallery``; a session whose views did not
+    come together is counted, not scored."""
     faces = served.template.faces
     measurer = Measurer.of(served.template)
     rows = []
     for number, person in enumerate(found):
+        ceiling = gallery.person_distances(closed_spectrum(person.rest, faces, served.k))
         for variant in variants:
             views = session_views(served, person, faces, variant)
             for length in LENGTHS:
                 if length <= len(views):
-                    body, _ = _fitted(served, basis, views[:length], registered=True)
+                    prefix = views[:length]
+                    body, _ = _fitted(served, basis, prefix, registered=True)
+                    row = {"views": length, "variant": variant, "registered": True, "fitted": True}
+                    today = {"today": gallery.person_distances(_decoded_union(served, prefix))}
                     rows.append(
-                        {"views": length, "variant": variant, "registered": True}
+                        row
                         | _scores(body, person, measurer, basis)
+                        | _ranked(body, person, served, gallery)
+                        | today
+                        | {"ceiling": ceiling}
                     )
             prefix = views[:UNREGISTERED_LENGTH]
             frames = moved(prefix, np.random.default_rng([FRAMES_STREAM, number]))
@@ -104,25 +117,65 @@ def _sessions(served: SpectralModels, basis: BodyBasis, found: list[Person], var
             row = {"views": len(sent), "variant": variant, "registered": False}
             try:
                 body, _ = _fitted(served, basis, sent, registered=False)
-            except NotInOneFrame:  # answered 409 body-not-fitted: counted, not scored
+            except NoBodyFits:  # answered 409 body-not-fitted: counted, not scored
                 rows.append(row | {"fitted": False})
                 continue
-            rows.append(row | {"fitted": True} | _scores(body, person, measurer, basis))
+            rows.append(
+                row
+                | {"fitted": True, "ceiling": ceiling}
+                | _scores(body, person, measurer, basis)
+                | _ranked(body, person, served, gallery)
+            )
     return rows
+
+
+def _ranked(body: SessionBody, person: Person, served: SpectralModels, gallery: Gallery) -> dict:
+    """The fitted body's spectrum against the gallery: every person's distance and the stored
+    shapes the service would rank its answer from."""
+    spectrum = closed_spectrum(body.vertices, served.template.faces, served.k)
+    return {
+        "label": person.label,
+        "distances": gallery.person_distances(spectrum),
+        "matches": gallery.matches(spectrum, ANSWERED * SHAPES_PER_PERSON),
+    }
+
+
+def _decoded_union(served: SpectralModels, views: list[SessionView]) -> np.ndarray:
+    """What the service ranked a session by before: its union (registered: fused) decoded into a
+    body by the shape decoder, that body's closed spectrum."""
+    fused = fused_spectrum([view.geometry for view in views], served.k)
+    union = session_union(served, views, "fused", fused).estimate
+    decoded = served.reconstruct(union.eigenvalues, union.sigma)
+    return closed_spectrum(decoded, served.template.faces, served.k)
 
 
 def _scales(rows: list[dict]) -> tuple[float, float]:
     """The factors that make 90 % of vertex errors and measurement errors fall inside Z σ."""
-    rows = [row for row in rows if row["fitted"]]
     vertex = np.concatenate([row["vertex_ratio"] for row in rows])
     measured = [m for row in rows for m in row["measured"].values() if m["half"] > 0]
     spread = [abs(m["error"]) / m["half"] * INTERVAL_Z for m in measured]
     return float(np.quantile(vertex, 0.9) / INTERVAL_Z), float(np.quantile(spread, 0.9) / INTERVAL_Z)
 
 
-def summary(rows: list[dict]) -> dict:
-    """Per reading (views / registered): vertex error, the mean body's, interval coverage, and per
-    measurement the mean absolute error (mm), the mean body's, coverage and how often measured."""
+def _identity(rows: list[dict], scale: float) -> dict:
+    """How often the person scanned is answered first and among the first ANSWERED, the first's
+    mean confidence as served, and the same first-place rate for the union decoded (the service's
+    ranking before, registered sessions) and for the true body at rest (the ceiling)."""
+    answers = [ranked_people(row["matches"], ANSWERED, scale) for row in rows]
+    today = [rank_of(row["today"], row["label"]) == 0 for row in rows if "today" in row]
+    return {
+        "top1": float(np.mean([a[0].label == row["label"] for a, row in zip(answers, rows, strict=True)])),
+        "top5": float(np.mean([row["label"] in {c.label for c in a} for a, row in zip(answers, rows, strict=True)])),
+        "confidence": float(np.mean([a[0].confidence for a in answers])),
+        "today_top1": float(np.mean(today)) if today else None,
+        "ceiling_top1": float(np.mean([rank_of(row["ceiling"], row["label"]) == 0 for row in rows])),
+    }
+
+
+def summary(rows: list[dict], scale: float) -> dict:
+    """Per reading (views / registered): vertex error, the mean body's, interval coverage, per
+    measurement the mean absolute error (mm), the mean body's, coverage and how often measured,
+    and identity (:func:`_identity`, confidences at ``scale``)."""
     out = {}
     for key in sorted({(row["views"], row["registered"]) for row in rows}):
         tried = [row for row in rows if (row["views"], row["registered"]) == key]
@@ -147,21 +200,28 @@ def summary(rows: list[dict]) -> dict:
             "mean_body_mm": float(np.mean([row["mean_body_mm"] for row in chosen])),
             "vertex_held": float(np.mean(ratios <= INTERVAL_Z)),
             "measurements": per,
+            "identity": _identity(chosen, scale),
         }
     return out
 
 
 def fit_bodies(models: Path, count: int, seed: int, test_c: int, command: str) -> dict:
-    """Write the uncalibrated basis, calibrate it on ``count`` people of ``seed``, write it again
-    with its factors, score Test C's first ``test_c`` people; write ``models/bodies.json``, the
-    manifest and the card's bodies section; return the metrics."""
+    """Write the uncalibrated basis, calibrate it on ``count`` people of ``seed`` (each stored at
+    rest beside the seed database for the identity's scale), write it again with its factors,
+    score Test C's first ``test_c`` people against the seed database; write
+    ``models/bodies.json``, the manifest and the card's bodies section; return the metrics."""
     basis = body_basis(models)
     basis.save(models / BODY_FILE)
     write_manifest(models)
     served = SpectralModels(models)
+    faces, seed_gallery = served.template.faces, Gallery.seed(models)
     _, calibration_people = people(count, seed)
-    sigma_scale, spread_scale = _scales(_sessions(served, basis, calibration_people, VARIANTS))
-    basis = replace(basis, sigma_scale=sigma_scale, spread_scale=spread_scale)
+    stored = np.array([closed_spectrum(person.rest, faces, served.k) for person in calibration_people])
+    gallery = seed_gallery.with_people([person.label for person in calibration_people], stored)
+    rows = [row for row in _sessions(served, basis, calibration_people, VARIANTS, gallery) if row["fitted"]]
+    sigma_scale, spread_scale = _scales(rows)
+    identity_scale = fitted_scale([(row["distances"], row["label"]) for row in rows])
+    basis = replace(basis, sigma_scale=sigma_scale, spread_scale=spread_scale, identity_scale=identity_scale)
     basis.save(models / BODY_FILE)
     write_manifest(models)
     served = SpectralModels(models)
@@ -172,7 +232,9 @@ def fit_bodies(models: Path, count: int, seed: int, test_c: int, command: str) -
         "test_c_people": test_c,
         "sigma_scale": sigma_scale,
         "spread_scale": spread_scale,
-        "evaluation": summary(_sessions(served, served.body, found, VARIANTS)),
+        "identity_scale": identity_scale,
+        "calibration": summary([row | {"fitted": True} for row in rows], identity_scale),
+        "evaluation": summary(_sessions(served, served.body, found, VARIANTS, seed_gallery), identity_scale),
         "command": command,
     }
     (models / BODIES_METRICS).write_text(json.dumps(content, indent=1) + "\n")

@@ -8,6 +8,7 @@ BEGIN, END = "<!-- bodies:begin -->", "<!-- bodies:end -->"
 GOAL_BODY_MM = 15.0  # the body from a 5-view session, mean vertex error
 GOAL_GIRTH_MM, GOAL_STATURE_MM = 15.0, 10.0  # measurements from a 5-view session, mean absolute error
 GOAL_WHOLE_GIRTH_MM, GOAL_WHOLE_HEIGHT_MM = 9.0, 4.0  # a session covering the body: ISO 20685-1's allowances
+GOAL_IDENTITY = 0.97  # the person scanned answered first from a 5-view session
 GIRTHS = ("chest_girth", "waist_girth", "hip_girth")
 HEIGHTS = ("stature", "crotch_height")
 SHORT = {
@@ -38,6 +39,7 @@ def goals(metrics: dict) -> dict[str, bool]:
         f"24 views: girths ≤ {GOAL_WHOLE_GIRTH_MM:.0f} mm, heights ≤ {GOAL_WHOLE_HEIGHT_MM:.0f} mm": (
             _worst(whole, GIRTHS) <= GOAL_WHOLE_GIRTH_MM and _worst(whole, HEIGHTS) <= GOAL_WHOLE_HEIGHT_MM
         ),
+        f"identity from 5 views ≥ {100 * GOAL_IDENTITY:.0f} %": five["identity"]["top1"] >= GOAL_IDENTITY,
     }
 
 
@@ -56,26 +58,32 @@ def render(metrics: dict, command: str) -> str:
         f"Produced by `{command}`.",
         "",
         f"The body `GET /v1/sessions/{{id}}/body` fits to a session's views, on {metrics['test_c_people']} of Test C's "
-        "people (the sessions of the table above, as cut and re-meshed, pooled): mean vertex error against the "
-        "person at rest (mm, after a rigid alignment), the mean body's beside it; each measurement's mean absolute "
-        "error against the same measurement on the true body, mm (the mean body's in brackets; — where the views "
-        "did not support it); sessions fitted: in their own frames, those whose views came together (the "
-        "others answer 409); how often the 90 % intervals held (calibrated on other people: σ × "
-        f"{metrics['sigma_scale']:.2f}, spread × {metrics['spread_scale']:.2f}).",
+        "people (the sessions above, as cut and re-meshed, pooled; in their own frames: those whose views came "
+        "together, the others answer 409): mean vertex error against the person at rest (mm, after a rigid "
+        "alignment), the mean body's beside it; each measurement's mean absolute error against the same "
+        "measurement on the true body, mm (the mean body's in brackets; — where the views did not support it); how "
+        f"often the 90 % intervals held (σ × {metrics['sigma_scale']:.2f}, spread × {metrics['spread_scale']:.2f}, "
+        "fitted on other people). Identity (`GET /v1/sessions/{id}/identity`): the fitted body's closed spectrum "
+        "ranked against the seed database, where these people are stored in ten poses of their own (none the "
+        "session's): the person scanned answered first / among the first five, the first answer's mean confidence "
+        f"(τ = {metrics['identity_scale']:.3f}), beside the ranking before (the session's union decoded into a body) "
+        "and the person's true body at rest (the most a spectrum can do).",
         "",
-        "| views | sessions fitted | body mm (p95) | mean body mm | "
-        + " | ".join(SHORT[n] for n in names)
-        + " | held: "
-        "vertices / measurements |",
-        "|---" * (6 + len(names)) + "|",
+        "| views | fitted | body mm (p95) | mean body | " + " | ".join(SHORT[n] for n in names) + " | held: vertices / "
+        "measurements | identity: first / five / confidence | union decoded | true body |",
+        "|---" * (8 + len(names)) + "|",
     ]
     for key, row in rows.items():
         measured = [row["measurements"][n] for n in names if row["measurements"][n]["held"] is not None]
         held = sum(m["held"] * m["measured"] for m in measured) / max(sum(m["measured"] for m in measured), 1)
+        identity = row["identity"]
+        today = "—" if identity["today_top1"] is None else percent(identity["today_top1"])
         lines.append(
             f"| {key} | {row['fitted']} of {row['sessions']} | {row['vertex_mm']:.1f} ({row['vertex_p95_mm']:.0f}) | "
             f"{row['mean_body_mm']:.0f} | " + " | ".join(_cell(row["measurements"][n]) for n in names) + " | "
-            f"{percent(row['vertex_held'])} / {percent(held)} |"
+            f"{percent(row['vertex_held'])} / {percent(held)} | {percent(identity['top1'])} / "
+            f"{percent(identity['top5'])} / {percent(identity['confidence'])} | {today} | "
+            f"{percent(identity['ceiling_top1'])} |"
         )
     verdicts = "; ".join(f"{goal}: {'met' if met else '**not met**'}" for goal, met in goals(metrics).items())
     lines += ["", f"Goals: {verdicts}.", END]

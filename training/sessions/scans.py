@@ -28,6 +28,7 @@ class Person:
     body: np.ndarray  # (n, 3) posed vertices, template topology
     masks: list[np.ndarray]  # the session's views as template vertex masks, in scanning order
     rest: np.ndarray  # (n, 3) the same body in the rest pose: the truth a fitted body is scored against
+    label: str  # who it is: the seed database's label for Test C's people (stored there in other poses)
 
 
 def session_masks(sampler: RegionSampler, body: np.ndarray, rng: np.random.Generator) -> list[np.ndarray]:
@@ -69,7 +70,7 @@ def people(count: int, seed: int) -> tuple[RegionSampler, list[Person]]:
         identities = source.body.sample_identities(seed * 100 + number, label, f"unknown_{label}", share)
         for index, identity in enumerate(identities):
             rng = np.random.default_rng([seed, number, index])
-            found.append(_scanned(source, sampler, identity, rng))
+            found.append(_scanned(source, sampler, identity, rng, f"calibration_{label}-{seed}-{index:03d}"))
     return sampler, found
 
 
@@ -82,27 +83,32 @@ def test_c_people(count: int, seed: int = 0) -> tuple[RegionSampler, list[Person
 
     source = AnnySource()
     sampler = RegionSampler(source.template())
-    drawn = []
+    drawn, first = [], 0  # the build numbers identities across its groups, in order
     for number, group in enumerate(groups_of(PRESETS["standard"])):
-        if group.name in TRAINING_GROUPS or group.count == 0:
-            continue
-        label = group.name.split("_")[-1]
-        identities = source.body.sample_identities(seed * 100 + number, label, group.name, group.count)
-        drawn.append([(number, index, identity) for index, identity in enumerate(identities)])
+        if group.name not in TRAINING_GROUPS and group.count > 0:
+            label = group.name.split("_")[-1]
+            identities = source.body.sample_identities(seed * 100 + number, label, group.name, group.count)
+            drawn.append(
+                [
+                    (number, index, identity, f"{group.name}-{first + index:03d}")
+                    for index, identity in enumerate(identities)
+                ]
+            )
+        first += group.count
     in_turn = [person for row in zip(*drawn, strict=False) for person in row][:count]  # a man, a woman, a child, …
     found = []
-    for number, index, identity in in_turn:
+    for number, index, identity, seed_label in in_turn:
         rng = np.random.default_rng([seed, number, index, SESSION_STREAM])
-        found.append(_scanned(source, sampler, identity, rng))
+        found.append(_scanned(source, sampler, identity, rng, seed_label))
     return sampler, found
 
 
-def _scanned(source, sampler: RegionSampler, identity, rng: np.random.Generator) -> Person:
+def _scanned(source, sampler: RegionSampler, identity, rng: np.random.Generator, label: str) -> Person:
     """One person posed at random and scanned, and the same person at rest."""
     body = source.body.pose(identity, source.body.valid_poses(identity, rng, 1, rest_first=False))[0]
     masks = session_masks(sampler, body, rng)
     rest = source.body.pose(identity, np.tile(np.eye(4), (1, len(source.body.bones), 1, 1)))[0]
-    return Person(np.asarray(body, np.float64), masks, np.asarray(rest, np.float64))
+    return Person(np.asarray(body, np.float64), masks, np.asarray(rest, np.float64), label)
 
 
 def view_meshes(person: Person, faces: np.ndarray, variant: str) -> list[Mesh]:

@@ -1,4 +1,8 @@
-"""``POST /v1/reconstruct``: the scanned person's body, rebuilt from the union of the scans' spectra.
+"""``POST /v1/reconstruct``: the scanned person's body, fitted to the uploads or rebuilt from the union's spectrum.
+
+Where every operand is an uploaded file placed on the template, the body is fitted to the
+uploads' points (:func:`app.api.rebuilt.scanned_body`, ``body_by: fitted``): shape and each
+upload's pose together, far closer than any spectrum gets (decision 039). Otherwise:
 
 The union of the operands (as ``/v1/union`` computes it) is read as a complete body's spectrum
 and decoded to that body in the rest pose, on the template's topology (the decoder in
@@ -25,7 +29,7 @@ from pydantic import Field
 from app.api.examples import success
 from app.api.operands import CapHolesQuery
 from app.api.problems import ProblemError, problem_responses
-from app.api.rebuilt import RoundTrip, rebuilt_body
+from app.api.rebuilt import BodyBy, RoundTrip, scanned_body
 from app.api.responses import UNION_PROBLEMS, UnionResponse
 from app.api.unions import UnionDep
 from app.inference.body import body_height, surface_area
@@ -36,6 +40,12 @@ VERTEX_DECIMALS = 5  # 10 µm: far below the decoder's error, and it keeps the J
 
 
 class ReconstructResponse(UnionResponse):
+    body_by: BodyBy = Field(
+        description="fitted: the body fitted to the uploads' points through their places on the template, shape "
+        "and each upload's pose together (every operand an upload, and a body fits them; decision 039); decoded: "
+        "the union's spectrum decoded by the shape decoder (spectra operands, or no body fitted: the warnings say "
+        "why)."
+    )
     height_m: float = Field(description="The rebuilt body's height (extent along the template's up axis, z).")
     area_m2: float = Field(description="The rebuilt body's surface area.")
     vertices: list[list[float]] = Field(
@@ -98,10 +108,12 @@ async def reconstruct(
         raise ProblemError(
             501, "reconstruction-unavailable", "Reconstruction unavailable", "these models have no shape decoder"
         )
-    outcome = await union.solved(cap_holes=cap_holes)
-    body = await rebuilt_body(union.request, models, outcome.result)
+    outcome = await union.solved(cap_holes=cap_holes, locate=models.body is not None)
+    body = await scanned_body(union.request, models, outcome)
     height, area = body_height(body.vertices), surface_area(body.vertices, models.template.faces)
     warnings = [*outcome.warnings, *round_trip_warnings(body.verdict, body.gap)]
+    if body.not_fitted is not None:
+        warnings.append(f"no body was fitted to the uploads ({body.not_fitted}): the union's spectrum was decoded")
     if format == "ply":
         headers = {
             "content-disposition": "inline; filename=body.ply",
@@ -109,10 +121,12 @@ async def reconstruct(
             "x-area-m2": f"{area:.4f}",
             "x-spectrum-relative-error": f"{body.gap:.4f}",
             "x-round-trip": body.verdict,
+            "x-body-by": body.by,
         }
         return Response(body.mesh, media_type="application/ply", headers=headers)
     return ReconstructResponse(
         **(outcome.fields(models) | {"warnings": warnings}),
+        body_by=body.by,
         height_m=height,
         area_m2=area,
         vertices=np.round(body.vertices, VERTEX_DECIMALS).tolist(),

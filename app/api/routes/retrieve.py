@@ -29,7 +29,7 @@ from app.api.deps import StoreDep
 from app.api.examples import success
 from app.api.operands import CapHolesQuery
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
-from app.api.rebuilt import RebuiltBody, rebuilt_body
+from app.api.rebuilt import RebuiltBody, scanned_body
 from app.api.unions import UnionDep, UnionOutcome
 from app.contract import PROFILE_SHARES
 from app.inference.body import open_surface
@@ -39,7 +39,7 @@ from app.retrieval.store import Match, ShapeStore
 router = APIRouter(tags=["retrieval"])
 ROUTE = "/retrieve"  # an open surface's query solves the body rebuilt from it: admitted like an upload (app.main)
 MAX_TOP = 100
-RankedBy = Literal["union", "rebuilt_body", "share_profile"]
+RankedBy = Literal["union", "fitted_body", "rebuilt_body", "share_profile"]
 RETRIEVE_RESPONSES = success("retrieve") | problem_responses(
     *UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS | DATABASE_SLUGS
 )
@@ -59,7 +59,9 @@ class MatchOut(BaseModel):
 class RetrieveResponse(BaseModel):
     query: list[float] = Field(description="The union spectrum of the operands, 1/m².")
     ranked_by: RankedBy = Field(
-        description="union: the query itself was ranked (a closed surface, or rebuild=false); rebuilt_body: the "
+        description="union: the query itself was ranked (a closed surface, or rebuild=false); fitted_body: the "
+        "query is an open surface and every operand an upload: ranked through the body fitted to the uploads' "
+        "points (decision 039); rebuilt_body: the "
         "query is an open surface (λ₁ > 1 % of λ₂), ranked through the body the shape decoder rebuilds from it; "
         "share_profile: two operands whose overlap was not told, a closed union, each stored shape ranked by the "
         "union told the share that brings it nearest (each match's share)."
@@ -73,6 +75,12 @@ class RetrieveResponse(BaseModel):
         default_factory=list,
         description="As in the union's answer (unit slips), and what ranking an open surface means.",
     )
+
+
+FITTED_NOTE = (
+    "the query is an open surface (λ₁ > 0), ranked through the body fitted to the uploads' points, whose closed "
+    "spectrum compares with the stored shapes' (5-view anny sessions: the model card's bodies table)"
+)
 
 
 def open_surface_warning(rebuild: bool, body: RebuiltBody | None) -> str:
@@ -119,7 +127,9 @@ async def looked_up_spectra(
         return union.eigenvalues, "union", []
     if not rebuild or models.decoder_session is None:
         return union.eigenvalues, "union", [open_surface_warning(rebuild, None)]
-    body = await rebuilt_body(request, models, union)
+    body = await scanned_body(request, models, outcome)
+    if body.by == "fitted":
+        return body.eigenvalues, "fitted_body", [FITTED_NOTE]
     return body.eigenvalues, "rebuilt_body", [open_surface_warning(rebuild, body)]
 
 
@@ -165,7 +175,7 @@ async def retrieve(
     """The stored complete shapes nearest to the union of the operands (an open one through its rebuilt body,
     two operands whose overlap is not told by their share profile)."""
     models = union.models
-    outcome = await union.solved(cap_holes=cap_holes)
+    outcome = await union.solved(cap_holes=cap_holes, locate=models.body is not None)
     looked_up, ranked_by, notes = await looked_up_spectra(union.request, models, outcome, rebuild, profile)
     matches, first = await ranked(store, looked_up, ranked_by, top)
     return RetrieveResponse(

@@ -1,29 +1,43 @@
-"""``GET /v1/sessions/{id}/body``: the rest-pose body fitted to a session's views, and its measurements.
+"""The person a session scanned: ``GET /v1/sessions/{id}/body``, the rest-pose body fitted to its
+views and its measurements; ``GET /v1/sessions/{id}/identity``, the stored people nearest that body.
 
-The fit and the measurements are :mod:`app.sessions.body`'s; here the session is read, the fit
-run off the event loop, and the answer shaped. The fit costs a few seconds of one core whatever
-the session holds (it reads at most ``FIT_POINTS`` of the views' points).
+The fit, the measurements and the ranking are :mod:`app.sessions`'s; here the session is read, the
+fit run off the event loop, the body's spectrum solved on the solver pool, and the answer shaped.
+A fit costs a few seconds of one core whatever the session holds (it reads at most
+``FIT_POINTS`` of the views' points); both routes are admitted like uploads (``app.main``).
 """
 
-from typing import Annotated
+from collections.abc import Callable
+from dataclasses import asdict
+from typing import Annotated, Literal, TypeVar
 
 import anyio
-from fastapi import APIRouter, Request
+import numpy as np
+from fastapi import APIRouter, Query, Request
 from pydantic import BaseModel, Field
 
-from app.api.deps import ModelsDep, SessionsDep
+from app.api.deps import ModelsDep, SessionsDep, StoreDep
+from app.api.examples import success
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, ProblemError, problem_responses
+from app.api.rebuilt import body_mesh
 from app.api.responses import MODEL_VERSION_FIELD
 from app.api.routes.sessions import ROUTE, SESSION_SLUGS, SessionId, not_found
-from app.inference.bodyfit import NotEnoughSeen
+from app.geometry.pipeline import SpectrumOptions
+from app.inference.bodyfit import FittedBody, NotEnoughSeen
 from app.inference.models import SpectralModels
-from app.sessions.body import SEEN, NotInOneFrame, SessionBody, session_body
+from app.sessions.body import SEEN, NoBodyFits, SessionBody, fitted_session, session_body
+from app.sessions.identity import SHAPES_PER_PERSON, ahead_warning, ranked_people
 from app.sessions.reading import SessionState, session_state
 from app.sessions.records import SessionNotFound
 from app.sessions.session import session_cover
+from app.sessions.store import SessionStore
+
+T = TypeVar("T")
 
 router = APIRouter(tags=["sessions"])
 BODY_SLUGS = frozenset({"body-unavailable", "body-not-fitted"})
+BODY, IDENTITY = "/body", "/identity"  # under a session's path; both fit a body (app.main admits them)
+MAX_TOP = 20
 
 
 class MeasurementAnswer(BaseModel):
@@ -53,12 +67,36 @@ class BodyAnswer(BaseModel):
     )
 
 
+class PersonAnswer(BaseModel):
+    label: str = Field(description="The stored person's identity label.")
+    shape_id: str = Field(description="Their stored shape nearest the fitted body.")
+    distance: float = Field(description="ShapeDNA distance from the fitted body's spectrum to that shape's.")
+    confidence: float = Field(
+        description="Softmax of −d²/2τ² over the people ranked, τ calibrated on anny sessions: how often the "
+        "first person is the one scanned (the model card's bodies section)."
+    )
+
+
+class IdentityAnswer(BaseModel):
+    id: str = Field(description="The session's id.")
+    model_version: str = MODEL_VERSION_FIELD
+    views: int = Field(description="The views the body was fitted to.")
+    ranked_by: Literal["fitted_body"] = Field(
+        description="fitted_body: the stored shapes ranked by their distance to the closed spectrum of the body "
+        "fitted to the session's views (its union, an open surface, does not compare with stored closed bodies)."
+    )
+    looked_up: list[float] = Field(description="The fitted body's closed spectrum, 1/m².")
+    people: list[PersonAnswer] = Field(description="One per stored person, nearest first.")
+    warnings: list[str] = Field(description="When the first person is not clearly ahead of the others.")
+
+
+PERSON_PROBLEMS = problem_responses(
+    404, 409, 422, 501, 503, slugs=SESSION_SLUGS | BODY_SLUGS | DATABASE_SLUGS | MODEL_SLUGS | {"invalid-request"}
+)
+
+
 @router.get(
-    ROUTE + "/{session_id}/body",
-    response_model=BodyAnswer,
-    responses=problem_responses(
-        404, 409, 422, 501, 503, slugs=SESSION_SLUGS | BODY_SLUGS | DATABASE_SLUGS | MODEL_SLUGS | {"invalid-request"}
-    ),
+    ROUTE + "/{session_id}" + BODY, response_model=BodyAnswer, responses=PERSON_PROBLEMS | success("session_body")
 )
 async def session_body_route(
     request: Request, session_id: SessionId, models: ModelsDep, sessions: SessionsDep
@@ -66,20 +104,68 @@ async def session_body_route(
     """The body fitted to the session's views (shape and pose together, through their places on the
     template), in the rest pose, with each vertex's uncertainty and the body measurements the views
     support."""
-    if models.body is None or models.measurer is None:
-        raise ProblemError(501, "body-unavailable", "Body fitting unavailable", "these models have no body.npz")
-    try:
-        state = await session_state(sessions, models, session_id, request.app.state.solver.session_union)
-    except SessionNotFound:
-        raise not_found(session_id) from None
-    try:
-        body = await anyio.to_thread.run_sync(_fitted, models, state)
-    except (NotEnoughSeen, NotInOneFrame) as exc:
-        raise ProblemError(409, "body-not-fitted", "No body fitted to this session", str(exc)) from None
+    state = await _session(request, models, sessions, session_id)
+    body = await _fit(_measured, models, state)
     return _shaped(session_id, models.version, len(state.views), body)
 
 
-def _fitted(models: SpectralModels, state: SessionState) -> SessionBody:
+@router.get(
+    ROUTE + "/{session_id}" + IDENTITY,
+    response_model=IdentityAnswer,
+    responses=PERSON_PROBLEMS | success("session_identity"),
+)
+async def session_identity_route(
+    request: Request,
+    session_id: SessionId,
+    models: ModelsDep,
+    sessions: SessionsDep,
+    store: StoreDep,
+    top: Annotated[int, Query(ge=1, le=MAX_TOP, description="People to answer.")] = 5,
+) -> IdentityAnswer:
+    """The stored people nearest the body fitted to the session's views, one answer per person, each
+    with a calibrated confidence."""
+    state = await _session(request, models, sessions, session_id)
+    fitted = await _fit(_fitted, models, state)
+    mesh = await anyio.to_thread.run_sync(body_mesh, models, fitted.vertices(models.body))
+    report = await request.app.state.solver.solve(mesh, "ply", SpectrumOptions(k=models.k))
+    spectrum = np.asarray(report.eigenvalues, dtype=np.float64)
+    matches = await anyio.to_thread.run_sync(store.nearest, spectrum, top * SHAPES_PER_PERSON)
+    people = ranked_people(matches, top, models.body.identity_scale)
+    return IdentityAnswer(
+        id=session_id,
+        model_version=models.version,
+        views=len(state.views),
+        ranked_by="fitted_body",
+        looked_up=spectrum.tolist(),
+        people=[PersonAnswer(**asdict(person)) for person in people],
+        warnings=ahead_warning(people),
+    )
+
+
+async def _session(request: Request, models: SpectralModels, sessions: SessionStore, session_id: str) -> SessionState:
+    if models.body is None or models.measurer is None:
+        raise ProblemError(501, "body-unavailable", "Body fitting unavailable", "these models have no body.npz")
+    try:
+        return await session_state(sessions, models, session_id, request.app.state.solver.session_union)
+    except SessionNotFound:
+        raise not_found(session_id) from None
+
+
+async def _fit(fit: Callable[[SpectralModels, SessionState], T], models: SpectralModels, state: SessionState) -> T:
+    """``fit`` run off the event loop; a session it cannot fit a body to is a 409."""
+    try:
+        return await anyio.to_thread.run_sync(fit, models, state)
+    except (NotEnoughSeen, NoBodyFits) as exc:
+        raise ProblemError(409, "body-not-fitted", "No body fitted to this session", str(exc)) from None
+
+
+def _fitted(models: SpectralModels, state: SessionState) -> FittedBody:
+    if not state.views:
+        raise NotEnoughSeen("the session has no view yet")
+    return fitted_session(models.body, models.template.vertices, state.views, state.meta.registered)
+
+
+def _measured(models: SpectralModels, state: SessionState) -> SessionBody:
     if not state.views:
         raise NotEnoughSeen("the session has no view yet")
     cover = session_cover(state.views)
