@@ -257,3 +257,13 @@ def test_scans_cut_from_a_stored_body_find_that_body_first(client, template, sca
     assert len({p["label"] for p in people}) == len(people) == 5  # one answer per person
     confidences = [p["confidence"] for p in people]
     assert confidences == sorted(confidences, reverse=True) and sum(confidences) <= 1 + 1e-9
+
+
+def test_a_ball_is_no_body(client):
+    """A 10 cm ball is placed somewhere on the template, but no body passes through its points."""
+    ball = trimesh.creation.icosphere(subdivisions=4, radius=0.1).export(file_type="ply")
+    session = new_session(client, registered=True)["id"]
+    assert add(client, session, "ball.ply", ball).status_code == 201
+    answer = client.get(f"/v1/sessions/{session}/body")
+    assert answer.status_code == 409 and answer.json()["type"].endswith("/body-not-fitted")
+    assert "do not fit a body" in answer.json()["detail"]

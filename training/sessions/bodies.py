@@ -99,18 +99,18 @@ def _sessions(
         for variant in variants:
             views = session_views(served, person, faces, variant)
             for length in LENGTHS:
-                if length <= len(views):
-                    prefix = views[:length]
+                if length > len(views):
+                    continue
+                prefix = views[:length]
+                row = {"views": length, "variant": variant, "registered": True}
+                try:
                     body, _ = _fitted(served, basis, prefix, registered=True)
-                    row = {"views": length, "variant": variant, "registered": True, "fitted": True}
-                    today = {"today": gallery.person_distances(_decoded_union(served, prefix))}
-                    rows.append(
-                        row
-                        | _scores(body, person, measurer, basis)
-                        | _ranked(body, person, served, gallery)
-                        | today
-                        | {"ceiling": ceiling}
-                    )
+                except NoBodyFits:  # answered 409 body-not-fitted: counted, not scored
+                    rows.append(row | {"fitted": False})
+                    continue
+                today = {"today": gallery.person_distances(_decoded_union(served, prefix)), "ceiling": ceiling}
+                scores = _scores(body, person, measurer, basis) | _ranked(body, person, served, gallery)
+                rows.append(row | {"fitted": True} | scores | today)
             prefix = views[:UNREGISTERED_LENGTH]
             frames = moved(prefix, np.random.default_rng([FRAMES_STREAM, number]))
             sent = [replace(view, geometry=frame) for view, frame in zip(prefix, frames, strict=True)]
