@@ -181,7 +181,7 @@ def examples(overlap: float) -> list[Example]:
             True,
         ),
         Example(
-            f"curl -s '{URL}/v1/sessions/$(jq -r .id session.json)/identity?top=3'",
+            f'curl -s "{URL}/v1/sessions/$(jq -r .id session.json)/identity?top=3"',
             fields("ranked_by", "people", "warnings"),
             "session_identity",
             True,
