@@ -40,7 +40,7 @@ from app.api.routes.models import ModelsResponse
 from app.api.routes.overlap import OverlapResponse
 from app.api.routes.reconstruct import ReconstructResponse
 from app.api.routes.retrieve import RetrieveResponse
-from app.api.routes.session_body import BodyAnswer
+from app.api.routes.session_person import BodyAnswer
 from app.api.routes.sessions import SessionOptions, SessionResponse
 from app.api.routes.shapes import ShapeOut, ShapePage
 from app.api.routes.spectrum import FootprintedReport

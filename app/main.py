@@ -24,7 +24,7 @@ from app.api.routes import (
     overlap,
     reconstruct,
     retrieve,
-    session_body,
+    session_person,
     sessions,
     shapes,
     spectrum,
@@ -90,7 +90,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         byte_budget=settings.max_inflight_upload_bytes,
         max_body_bytes=settings.max_upload_bytes,
         solving_paths=frozenset({API_PREFIX + reconstruct.ROUTE, API_PREFIX + retrieve.ROUTE}),
-        solving_suffixes=(session_body.BODY, session_body.IDENTITY),
+        solving_suffixes=(session_person.BODY, session_person.IDENTITY),
     )
     app.add_middleware(
         UploadLimitMiddleware, max_bytes=settings.max_upload_bytes, body_timeout_s=settings.body_timeout_seconds
@@ -101,7 +101,18 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(health.router)
     app.include_router(metrics_router)
     app.include_router(spectrum.router, prefix=API_PREFIX)
-    routers = (unions, overlap, localize, correspondence, reconstruct, models, retrieve, shapes, sessions, session_body)
+    routers = (
+        unions,
+        overlap,
+        localize,
+        correspondence,
+        reconstruct,
+        models,
+        retrieve,
+        shapes,
+        sessions,
+        session_person,
+    )
     for routes in routers:
         app.include_router(routes.router, prefix=API_PREFIX)
     return app

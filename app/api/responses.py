@@ -77,3 +77,14 @@ class UnionResponse(UnionInterval):
         "operands more than 10× apart in size (a unit slip?), or an upload whose places on the template are too "
         "uncertain to trust its region, each naming its operand.",
     )
+
+
+class PersonAnswer(BaseModel):
+    label: str = Field(description="The stored person's identity label.")
+    shape_id: str = Field(description="Their stored shape nearest the query (a person is stored in several poses).")
+    distance: float = Field(description="ShapeDNA distance from the spectrum ranked to that shape's.")
+    confidence: float | None = Field(
+        description="Ranked by a fitted body: a softmax of −d²/2τ² over the people ranked, τ calibrated on anny "
+        "sessions (how often the first person is the one scanned: the model card's bodies section); null for "
+        "rankings it was not calibrated on."
+    )

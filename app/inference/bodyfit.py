@@ -45,15 +45,18 @@ class NotEnoughSeen(ValueError):
 class BodyBasis:
     """The shape basis and its skinning: ``mean`` (V, 3) m, ``components`` (C, V, 3) each
     whitened coefficient's displacement (m), ``weights`` (V, P) each vertex's share of each part's
-    motion (rows sum to 1); and what the calibration found (1 before it): the factors on the
-    posterior's vertex σ and on the spread of measurements over posterior bodies, and the
-    distance scale τ of an identity's confidence (:mod:`app.sessions.identity`)."""
+    motion (rows sum to 1); and what the calibration found (1 before it): per band of view counts
+    (``bands``: each band's most views, the last holding any more), the factors on the
+    posterior's vertex σ and on the spread of measurements over posterior bodies (short sessions
+    err more than their posterior says, long ones less), and the distance scale τ of an
+    identity's confidence (:mod:`app.sessions.identity`)."""
 
     mean: np.ndarray
     components: np.ndarray
     weights: np.ndarray
-    sigma_scale: float = 1.0
-    spread_scale: float = 1.0
+    bands: tuple[int, ...] = (1,)
+    sigma_scale: tuple[float, ...] = (1.0,)
+    spread_scale: tuple[float, ...] = (1.0,)
     identity_scale: float = 1.0
 
     @classmethod
@@ -64,8 +67,9 @@ class BodyBasis:
             data["mean"].astype(np.float64),
             data["components"].astype(np.float64),
             weights / weights.sum(axis=1, keepdims=True),  # stored at half precision
-            float(data["sigma_scale"]),
-            float(data["spread_scale"]),
+            tuple(int(band) for band in data["bands"]),
+            tuple(float(scale) for scale in data["sigma_scale"]),
+            tuple(float(scale) for scale in data["spread_scale"]),
             float(data["identity_scale"]),
         )
 
@@ -75,10 +79,16 @@ class BodyBasis:
             mean=self.mean.astype(np.float32),
             components=self.components.astype(np.float16),
             weights=self.weights.astype(np.float16),
-            sigma_scale=self.sigma_scale,
-            spread_scale=self.spread_scale,
+            bands=np.asarray(self.bands),
+            sigma_scale=np.asarray(self.sigma_scale),
+            spread_scale=np.asarray(self.spread_scale),
             identity_scale=self.identity_scale,
         )
+
+    def scales(self, views: int) -> tuple[float, float]:
+        """The factors on the vertex σ and on the measurements' spread for a fit to ``views`` views."""
+        band = min(int(np.searchsorted(self.bands, views)), len(self.bands) - 1)
+        return self.sigma_scale[band], self.spread_scale[band]
 
     def rest(self, coefficients: np.ndarray) -> np.ndarray:
         """(V, 3) or (n, V, 3): the rest-pose body of whitened ``coefficients`` (C,) or (n, C)."""

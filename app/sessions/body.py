@@ -101,6 +101,7 @@ def session_body(
 ) -> SessionBody:
     """The session's body and measurements; ``coverage``: each body part's covered share."""
     fitted = fitted_session(basis, measurer.template.vertices, views, registered)
+    sigma_scale, spread_scale = basis.scales(len(views))
     vertices = fitted.vertices(basis)
     values = measurer.measure(vertices)
     drawn = [measurer.measure(body) for body in fitted.samples(basis, SAMPLES, np.random.default_rng(SEED))]
@@ -112,7 +113,7 @@ def session_body(
         elif value is None:
             not_measured[name] = "the fitted body has no torso slice there"
         else:
-            spread = np.std([d[name] for d in drawn if d[name] is not None]) * basis.spread_scale
+            spread = np.std([d[name] for d in drawn if d[name] is not None]) * spread_scale
             half = INTERVAL_Z * float(spread)
             measurements.append(Measurement(name, value, value - half, value + half))
-    return SessionBody(vertices, fitted.vertex_sigma(basis) * basis.sigma_scale, measurements, not_measured, fitted)
+    return SessionBody(vertices, fitted.vertex_sigma(basis) * sigma_scale, measurements, not_measured, fitted)

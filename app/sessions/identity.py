@@ -46,11 +46,12 @@ def ranked_people(matches: list[Match], top: int, scale: float) -> list[Candidat
     ]
 
 
-def ahead_warning(people: list[Candidate]) -> list[str]:
-    """A warning when the first person is not clearly ahead of the others."""
-    if not people or people[0].confidence >= CLEARLY_AHEAD:
+def ahead_warning(first: float | None) -> list[str]:
+    """A warning when the first person's confidence (None: none ranked, or no calibrated
+    confidence) says they are not clearly ahead of the others."""
+    if first is None or first >= CLEARLY_AHEAD:
         return []
     return [
-        f"the first person is not clearly ahead (confidence {people[0].confidence:.2f}): the views leave "
-        "several stored people about as near; this is not an identification"
+        f"the first person is not clearly ahead (confidence {first:.2f}): the views leave several stored people "
+        "about as near; this is not an identification"
     ]

@@ -135,6 +135,7 @@ def test_a_whole_body_scan_with_its_holes_capped_is_solved_closed_and_found_by_i
     assert answer["ranked_by"] == "union" and answer["warnings"] == []
     assert answer["looked_up"] == pytest.approx(spectrum["eigenvalues"])
     assert answer["matches"][0]["label"] == LABEL
+    assert answer["people"][0]["label"] == LABEL and answer["people"][0]["confidence"] is None  # not calibrated
     assert np.max(np.abs(np.array(without_soles[1:]) / closed[1:] - 1)) > 0.3
 
 
@@ -179,3 +180,7 @@ def test_scans_cut_from_a_stored_body_find_it_through_the_body_fitted_to_them(cl
     answer = response.json()
     assert answer["ranked_by"] == "fitted_body"
     assert answer["matches"][0]["id"] == stored["id"] and answer["matches"][0]["label"] == LABEL
+    people = answer["people"]  # one answer per person, each with a calibrated confidence
+    assert people[0]["label"] == LABEL and people[0]["shape_id"] == stored["id"]
+    assert len({p["label"] for p in people}) == len(people) == 5
+    assert all(p["confidence"] is not None for p in people)

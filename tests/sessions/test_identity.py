@@ -26,7 +26,7 @@ def test_the_confidence_is_a_softmax_of_the_squared_distances():
 
 def test_a_first_person_not_clearly_ahead_is_warned_about():
     close = ranked_people([match("ann", "a", 0.50), match("bob", "b", 0.51), match("cy", "c", 0.52)], top=3, scale=1.0)
-    assert close[0].confidence < CLEARLY_AHEAD and ahead_warning(close)
+    assert close[0].confidence < CLEARLY_AHEAD and ahead_warning(close[0].confidence)
     clear = ranked_people([match("ann", "a", 0.0), match("bob", "b", 5.0)], top=2, scale=1.0)
-    assert clear[0].confidence > CLEARLY_AHEAD and not ahead_warning(clear)
-    assert ranked_people([], top=3, scale=1.0) == [] and not ahead_warning([])
+    assert clear[0].confidence > CLEARLY_AHEAD and not ahead_warning(clear[0].confidence)
+    assert ranked_people([], top=3, scale=1.0) == [] and not ahead_warning(None)

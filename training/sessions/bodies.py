@@ -37,6 +37,7 @@ from training.sessions.scans import VARIANTS, Person, people, test_c_people
 
 LENGTHS = (3, 5, 12, 24)
 ANSWERED = 5  # people an identity answers (its top)
+BANDS = (5, 12, 32)  # the intervals are calibrated per band of view counts: up to 5, 12, any more
 UNREGISTERED_LENGTH = 5  # views in their own frames, aligned first: scored at this length
 BODIES_METRICS = "bodies.json"
 FRAMES_STREAM = 13  # the random frames unregistered views are sent in
@@ -150,7 +151,7 @@ def _decoded_union(served: SpectralModels, views: list[SessionView]) -> np.ndarr
 
 
 def _scales(rows: list[dict]) -> tuple[float, float]:
-    """The factors that make 90 % of vertex errors and measurement errors fall inside Z σ."""
+    """The factors that make 90 % of ``rows``' vertex errors and measurement errors fall inside Z σ."""
     vertex = np.concatenate([row["vertex_ratio"] for row in rows])
     measured = [m for row in rows for m in row["measured"].values() if m["half"] > 0]
     spread = [abs(m["error"]) / m["half"] * INTERVAL_Z for m in measured]
@@ -219,9 +220,15 @@ def fit_bodies(models: Path, count: int, seed: int, test_c: int, command: str) -
     stored = np.array([closed_spectrum(person.rest, faces, served.k) for person in calibration_people])
     gallery = seed_gallery.with_people([person.label for person in calibration_people], stored)
     rows = [row for row in _sessions(served, basis, calibration_people, VARIANTS, gallery) if row["fitted"]]
-    sigma_scale, spread_scale = _scales(rows)
+    lower = (0, *BANDS[:-1])
+    scales = [
+        _scales([row for row in rows if low < row["views"] <= high]) for low, high in zip(lower, BANDS, strict=True)
+    ]
+    sigma_scale, spread_scale = tuple(s[0] for s in scales), tuple(s[1] for s in scales)
     identity_scale = fitted_scale([(row["distances"], row["label"]) for row in rows])
-    basis = replace(basis, sigma_scale=sigma_scale, spread_scale=spread_scale, identity_scale=identity_scale)
+    basis = replace(
+        basis, bands=BANDS, sigma_scale=sigma_scale, spread_scale=spread_scale, identity_scale=identity_scale
+    )
     basis.save(models / BODY_FILE)
     write_manifest(models)
     served = SpectralModels(models)
@@ -230,8 +237,9 @@ def fit_bodies(models: Path, count: int, seed: int, test_c: int, command: str) -
         "people": count,
         "seed": seed,
         "test_c_people": test_c,
-        "sigma_scale": sigma_scale,
-        "spread_scale": spread_scale,
+        "bands": list(BANDS),
+        "sigma_scale": list(sigma_scale),
+        "spread_scale": list(spread_scale),
         "identity_scale": identity_scale,
         "calibration": summary([row | {"fitted": True} for row in rows], identity_scale),
         "evaluation": summary(_sessions(served, served.body, found, VARIANTS, seed_gallery), identity_scale),

@@ -43,6 +43,11 @@ def goals(metrics: dict) -> dict[str, bool]:
     }
 
 
+def _per_band(metrics: dict, key: str) -> str:
+    """A calibration factor per band of view counts, as ``≤ 5: 3.1, …``."""
+    return ", ".join(f"≤ {band}: {scale:.2f}" for band, scale in zip(metrics["bands"], metrics[key], strict=True))
+
+
 def _cell(measure: dict) -> str:
     if measure["mae_mm"] is None:
         return "—"
@@ -62,8 +67,9 @@ def render(metrics: dict, command: str) -> str:
         "together, the others answer 409): mean vertex error against the person at rest (mm, after a rigid "
         "alignment), the mean body's beside it; each measurement's mean absolute error against the same "
         "measurement on the true body, mm (the mean body's in brackets; — where the views did not support it); how "
-        f"often the 90 % intervals held (σ × {metrics['sigma_scale']:.2f}, spread × {metrics['spread_scale']:.2f}, "
-        "fitted on other people). Identity (`GET /v1/sessions/{id}/identity`): the fitted body's closed spectrum "
+        f"often the 90 % intervals held (σ × {_per_band(metrics, 'sigma_scale')}, spread × "
+        f"{_per_band(metrics, 'spread_scale')} by view count, fitted on other people). "
+        "Identity (`GET /v1/sessions/{id}/identity`): the fitted body's closed spectrum "
         "ranked against the seed database, where these people are stored in ten poses of their own (none the "
         "session's): the person scanned answered first / among the first five, the first answer's mean confidence "
         f"(τ = {metrics['identity_scale']:.3f}), beside the ranking before (the session's union decoded into a body) "

@@ -20,7 +20,7 @@ from app.api.deps import ModelsDep, SessionsDep, StoreDep
 from app.api.examples import success
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, ProblemError, problem_responses
 from app.api.rebuilt import body_mesh
-from app.api.responses import MODEL_VERSION_FIELD
+from app.api.responses import MODEL_VERSION_FIELD, PersonAnswer
 from app.api.routes.sessions import ROUTE, SESSION_SLUGS, SessionId, not_found
 from app.geometry.pipeline import SpectrumOptions
 from app.inference.bodyfit import FittedBody, NotEnoughSeen
@@ -64,16 +64,6 @@ class BodyAnswer(BaseModel):
     measurements: list[MeasurementAnswer] = Field(description="Those the session's views support.")
     not_measured: dict[str, str] = Field(
         description=f"Measurements left out, with why: the body parts they rest on covered below {SEEN:.0%}."
-    )
-
-
-class PersonAnswer(BaseModel):
-    label: str = Field(description="The stored person's identity label.")
-    shape_id: str = Field(description="Their stored shape nearest the fitted body.")
-    distance: float = Field(description="ShapeDNA distance from the fitted body's spectrum to that shape's.")
-    confidence: float = Field(
-        description="Softmax of −d²/2τ² over the people ranked, τ calibrated on anny sessions: how often the "
-        "first person is the one scanned (the model card's bodies section)."
     )
 
 
@@ -138,7 +128,7 @@ async def session_identity_route(
         ranked_by="fitted_body",
         looked_up=spectrum.tolist(),
         people=[PersonAnswer(**asdict(person)) for person in people],
-        warnings=ahead_warning(people),
+        warnings=ahead_warning(people[0].confidence if people else None),
     )
 
 
