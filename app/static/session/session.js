@@ -144,7 +144,7 @@ async function refresh() {
   const [region, ply, found, rebuilt, body] = await Promise.all([
     fetch("/v1/localize", { method: "POST", body: spectraForm() }).then(answer),
     fetch("/v1/localize?format=ply", { method: "POST", body: spectraForm() }).then((r) => r.arrayBuffer()),
-    fetch(`/v1/retrieve?top=${RETRIEVED}`, { method: "POST", body: spectraForm() }).then(answer),
+    session ? identified(session) : fetch(`/v1/retrieve?top=${RETRIEVED}`, { method: "POST", body: spectraForm() }).then(answer),
     fetch("/v1/reconstruct?format=ply", { method: "POST", body: spectraForm() }),
     session ? fetch(`/v1/sessions/${session.id}/body`) : null,
   ]);
@@ -162,6 +162,18 @@ async function refresh() {
   await showRebuilt(rebuilt);
   document.body.dataset.parts = String(parts.length); // what the browser test waits for
   setStatus(`${parts.length} part${parts.length > 1 ? "s" : ""}; union covers ${(100 * region.area_fraction).toFixed(1)} % of the body${openNote(region)}.`);
+}
+
+// A registered session's person, as the stored people nearest the body fitted to its scans, in the
+// shape /v1/retrieve answers (one match per person); a session no body fits says why instead.
+async function identified(current) {
+  const response = await fetch(`/v1/sessions/${current.id}/identity?top=${SHOWN}`);
+  if (response.status === 409) {
+    return { ranked_by: "fitted_body", matches: [], warnings: [(await response.json()).detail] };
+  }
+  const found = await answer(response);
+  const matches = found.people.map((person) => ({ label: person.label, distance: person.distance, share: null }));
+  return { ranked_by: found.ranked_by, matches, warnings: found.warnings };
 }
 
 // Covering the template is not being closed: scans of the whole body still leave holes (the
