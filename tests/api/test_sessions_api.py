@@ -3,6 +3,7 @@ exact union's spectrum for registered views, the learned chain's for the others)
 and what to scan next; a bad view, a full or a missing session are clear problems that leave the
 session as it was."""
 
+import shutil
 from dataclasses import replace
 
 import numpy as np
@@ -11,9 +12,10 @@ import trimesh
 from fastapi.testclient import TestClient
 from scipy.spatial.transform import Rotation
 
-from app.contract import SESSIONS_FILE
+from app.contract import BODY_FILE, SESSIONS_FILE
 from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
+from app.inference.manifest import write_manifest
 from app.inference.template import PART_NAMES, Template
 from app.main import create_app
 from app.samples import SESSION_SCANS, template_part
@@ -267,3 +269,19 @@ def test_a_ball_is_no_body(client):
     answer = client.get(f"/v1/sessions/{session}/body")
     assert answer.status_code == 409 and answer.json()["type"].endswith("/body-not-fitted")
     assert "do not fit a body" in answer.json()["detail"]
+
+
+def test_models_without_a_body_basis_say_so(tmp_path, client):
+    """The served models fit bodies and say so; a models folder without body.npz (not in its
+    manifest) says it does not, and a session's body is a 501 problem there."""
+    assert client.get("/v1/models").json()["body"] is True
+    models = tmp_path / "models"
+    shutil.copytree(Settings().models_dir, models)
+    (models / BODY_FILE).unlink()
+    write_manifest(models)
+    settings = settings_for(tmp_path / "db.sqlite").model_copy(update={"models_dir": models})
+    with TestClient(create_app(settings)) as bare:
+        assert bare.get("/v1/models").json()["body"] is False
+        session = bare.post("/v1/sessions", json={"registered": True}).json()["id"]
+        answer = bare.get(f"/v1/sessions/{session}/body")
+        assert answer.status_code == 501 and answer.json()["type"].endswith("/body-unavailable")

@@ -39,6 +39,10 @@ class ModelsResponse(BaseModel):
         description="Whether uploaded parts are placed on the template (POST /v1/correspondence; regions and "
         "overlaps of uploads measured on the template)."
     )
+    body: bool = Field(
+        description="Whether a body is fitted to what was scanned (GET /v1/sessions/{id}/body and /identity; "
+        "/v1/reconstruct and /v1/retrieve of uploads through the fitted body)."
+    )
     database: DatabaseInfo = Field(description="The ShapeDNA database's backend and size.")
 
 
@@ -65,5 +69,6 @@ async def models_info(request: Request, models: ModelsDep) -> ModelsResponse:
         parts=list(PART_NAMES),
         told=[name for name, read in (("overlap", models.reads_overlap), ("boundary", models.reads_boundary)) if read],
         correspondence=models.correspondence is not None,
+        body=models.body is not None,
         database=database,
     )
