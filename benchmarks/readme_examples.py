@@ -130,7 +130,15 @@ def examples(overlap: float) -> list[Example]:
     both = "-F files=@no_head_neck.ply -F files=@no_left_forearm_hand.ply"
     key = f"-H 'X-API-Key: {KEY}'"
     union_fields = ("vertices", "area_fraction", "part_coverage", "template_vertices", "located_by")
-    body_fields = ("height_m", "area_m2", "body_eigenvalues", "spectrum_relative_error", "vertices")
+    body_fields = (
+        "body_by",
+        "height_m",
+        "area_m2",
+        "body_eigenvalues",
+        "spectrum_relative_error",
+        "vertices",
+        "sigma_m",
+    )
     footprint = f"'{URL}/v1/spectrum?footprint=true'"
     header = "sed '/end_header/q'"  # a PLY's text header, up to its end
     status = "-o /dev/null -w '%{http_code}\\n'"

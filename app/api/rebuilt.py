@@ -58,8 +58,8 @@ def round_trip(gap: float, union: UnionEstimate) -> RoundTrip:
 @dataclass(frozen=True)
 class RebuiltBody:
     """A rebuilt body: rest-pose vertices (m, template order), its PLY, its own spectrum (1/m²), the
-    mean relative gap of λ₂…λ_k to the union's, the round trip's verdict, how it was made, and
-    why it was not fitted where it could have been."""
+    mean relative gap of λ₂…λ_k to the union's, the round trip's verdict, how it was made, each
+    vertex's σ (m, a fitted body's), and why it was not fitted where it could have been."""
 
     vertices: np.ndarray
     mesh: bytes
@@ -67,6 +67,7 @@ class RebuiltBody:
     gap: float
     verdict: RoundTrip
     by: BodyBy = "decoded"
+    sigma: np.ndarray | None = None
     not_fitted: str | None = None
 
 
@@ -107,9 +108,9 @@ async def scanned_body(request: Request, models: SpectralModels, outcome: UnionO
         return replace(decoded, not_fitted=str(exc))
     vertices = fitted.vertices(models.body)
     mesh, eigenvalues = await _solved(request, models, vertices)
-    return RebuiltBody(
-        vertices, mesh, eigenvalues, spectrum_gap(eigenvalues, outcome.result.eigenvalues), "fitted", "fitted"
-    )
+    gap = spectrum_gap(eigenvalues, outcome.result.eigenvalues)
+    sigma = fitted.vertex_sigma(models.body) * models.body.scales(len(geometry))[0]
+    return RebuiltBody(vertices, mesh, eigenvalues, gap, "fitted", "fitted", sigma)
 
 
 async def _solved(request: Request, models: SpectralModels, vertices: np.ndarray) -> tuple[bytes, np.ndarray]:

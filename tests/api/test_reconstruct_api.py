@@ -259,6 +259,7 @@ def test_uploads_are_fitted_a_body_where_spectra_are_decoded(client, template):
     assert fitted.status_code == 200, fitted.text
     answer = fitted.json()
     assert answer["body_by"] == "fitted" and not any("no body was fitted" in w for w in answer["warnings"])
+    assert len(answer["sigma_m"]) == len(answer["vertices"]) and min(answer["sigma_m"]) > 0
     vertices = np.array(answer["vertices"])
     aligned = vertices - vertices.mean(axis=0) + template.vertices.mean(axis=0)
     fitted_error = np.linalg.norm(aligned - template.vertices, axis=1).mean()
