@@ -162,9 +162,7 @@ class _Fit:
 
     def cost(self, coefficients: np.ndarray, rotations: np.ndarray, translations: np.ndarray) -> float:
         """The robust (Cauchy) misfit of the points plus the coefficients' prior."""
-        residual = self._residual(coefficients, rotations, translations)[0]
-        ratio = (np.linalg.norm(residual, axis=1) / ROBUST_M) ** 2
-        return float((ROBUST_M / NOISE_M) ** 2 / 2 * np.log1p(ratio).sum() + coefficients @ coefficients / 2)
+        return _robust_cost(self._residual(coefficients, rotations, translations)[0], coefficients)
 
     def _residual(
         self, coefficients: np.ndarray, rotations: np.ndarray, translations: np.ndarray
@@ -206,7 +204,7 @@ class _Fit:
         gradient[:components] += self.coefficients
         hessian[components:, components:] += MOTION_DAMPING * np.eye(6 * poses * parts)
         self.hessian = hessian
-        before = self.cost(self.coefficients, self.rotations, self.translations)
+        before = _robust_cost(residual, self.coefficients)  # the residual in hand is the current one
         for _ in range(MAX_DAMPINGS):
             damped = hessian + self.damping * np.diag(np.diag(hessian))
             delta = -np.linalg.solve(damped, gradient)
@@ -241,6 +239,12 @@ class _Fit:
         covariance = np.linalg.inv(self.hessian)[:components, :components]
         residual = float(np.median(np.linalg.norm(gap, axis=1)))
         return FittedBody(self.coefficients, (covariance + covariance.T) / 2, len(self.points), residual)
+
+
+def _robust_cost(residual: np.ndarray, coefficients: np.ndarray) -> float:
+    """The Cauchy misfit of (n, 3) residuals at scale ROBUST_M plus the coefficients' unit prior."""
+    ratio = (np.linalg.norm(residual, axis=1) / ROBUST_M) ** 2
+    return float((ROBUST_M / NOISE_M) ** 2 / 2 * np.log1p(ratio).sum() + coefficients @ coefficients / 2)
 
 
 def _skew(vectors: np.ndarray) -> np.ndarray:

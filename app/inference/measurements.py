@@ -10,7 +10,6 @@ What a session did not see it cannot measure: each measurement names the body pa
 on, and a caller leaves out the ones whose parts were not seen (:data:`NEEDS`).
 """
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -177,16 +176,13 @@ class Measurer:
     def measure(self, vertices: np.ndarray) -> dict[str, float | None]:
         """Every measurement of a rest-pose body (V, 3), metres; None where the body's shape
         leaves it undefined (a slice that finds no torso)."""
-        taken: dict[str, Callable[[np.ndarray], float | None]] = {
-            "stature": self._stature,
-            "chest_girth": self._chest,
-            "waist_girth": self._waist,
-            "hip_girth": self._hip,
-            "crotch_height": self._crotch_height,
-            "arm_length": self._arm_length,
-            "shoulder_breadth": self._shoulder_breadth,
-        }
-        return {name: taken[name](vertices) for name in MEASUREMENTS}
+        taken = {
+            "stature": self._stature(vertices),
+            "crotch_height": self._crotch_height(vertices),
+            "arm_length": self._arm_length(vertices),
+            "shoulder_breadth": self._shoulder_breadth(vertices),
+        } | self._girths(vertices)
+        return {name: taken[name] for name in MEASUREMENTS}
 
     def _stature(self, vertices: np.ndarray) -> float:
         return float(np.ptp(vertices[:, UP]))
@@ -212,37 +208,24 @@ class Measurer:
         midline = float(vertices[self.landmarks.crotch, 0])
         return girth(vertices, self.template.faces, height, self.landmarks.torso, midline)
 
-    def _levels(self, vertices: np.ndarray) -> tuple[float, float, float]:
-        """The heights of the crotch, the chest girth and the step between slices."""
+    def _girths(self, vertices: np.ndarray) -> dict[str, float | None]:
+        """The chest girth just below the armpits; the hip girth, the largest from just above the
+        crotch to halfway to the chest; the waist girth, the smallest between the hip girth's
+        height and the chest's. Each slice at a step of SLICE_STEP of stature, taken once."""
         stature = self._stature(vertices)
-        armpit = min(vertices[i, UP] for i in self.landmarks.armpit)
-        return float(vertices[self.landmarks.crotch, UP]), armpit - CHEST_BELOW_ARMPIT * stature, SLICE_STEP * stature
-
-    def _chest(self, vertices: np.ndarray) -> float | None:
-        return self._torso_girth(vertices, self._levels(vertices)[1])
-
-    def _hip_search(self, vertices: np.ndarray) -> tuple[float | None, float]:
-        """The hip girth (the largest between just above the crotch and halfway to the chest)
-        and the height it was found at."""
-        crotch, chest, step = self._levels(vertices)
-        stature = self._stature(vertices)
-        heights = np.arange(crotch + HIP_ABOVE_CROTCH * stature, (crotch + chest) / 2, step)
-        found = [(g, h) for h in heights if (g := self._torso_girth(vertices, float(h))) is not None]
-        if not found:
-            return None, crotch
-        value, height = max(found)
-        return value, float(height)
-
-    def _hip(self, vertices: np.ndarray) -> float | None:
-        return self._hip_search(vertices)[0]
-
-    def _waist(self, vertices: np.ndarray) -> float | None:
-        """The smallest torso girth between the hip girth's height and the chest's."""
-        _, chest, step = self._levels(vertices)
-        hip = self._hip_search(vertices)[1]
-        heights = np.arange(hip + step, chest, step)
-        found = [g for h in heights if (g := self._torso_girth(vertices, float(h))) is not None]
-        return min(found) if found else None
+        crotch = float(vertices[self.landmarks.crotch, UP])
+        chest = min(vertices[i, UP] for i in self.landmarks.armpit) - CHEST_BELOW_ARMPIT * stature
+        step = SLICE_STEP * stature
+        hips = np.arange(crotch + HIP_ABOVE_CROTCH * stature, (crotch + chest) / 2, step)
+        found = [(g, float(h)) for h in hips if (g := self._torso_girth(vertices, float(h))) is not None]
+        hip, hip_height = max(found) if found else (None, crotch)
+        waist_heights = np.arange(hip_height + step, chest, step)
+        waists = [g for h in waist_heights if (g := self._torso_girth(vertices, float(h))) is not None]
+        return {
+            "chest_girth": self._torso_girth(vertices, chest),
+            "waist_girth": min(waists) if waists else None,
+            "hip_girth": hip,
+        }
 
 
 def supported(name: str, coverage: dict[str, float], least: float) -> bool:
