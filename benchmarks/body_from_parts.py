@@ -25,8 +25,8 @@ from app.inference.models import SpectralModels
 from app.sessions.body import NoBodyFits, fitted_views
 from app.sessions.chain import Located, chained_union, template_fold
 from app.sessions.session import session_view
-from training.reconstruction.evaluate import rigidly_aligned
-from training.sessions.identities import Gallery, closed_spectrum, rank_of
+from training.reconstruction.evaluate import closed_spectrum, rigidly_aligned
+from training.sessions.identities import Gallery, rank_of
 from training.sessions.reading import moved
 from training.sessions.scans import Person, solved_view, test_c_people, view_meshes
 

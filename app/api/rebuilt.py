@@ -21,7 +21,7 @@ from app.geometry.pipeline import SpectrumOptions
 from app.inference.body import open_surface, spectrum_gap
 from app.inference.bodyfit import NotEnoughSeen
 from app.inference.models import SpectralModels, UnionEstimate
-from app.sessions.body import NoBodyFits, fitted_views
+from app.sessions.body import NoBodyFits, calibrated_sigma, fitted_views
 from app.sessions.fused import view_of_part
 
 # The rebuilt body's spectrum is within ~2 % of a complete body's and ~5 % of a two-part union's
@@ -82,7 +82,7 @@ async def rebuilt_body(request: Request, models: SpectralModels, union: UnionEst
     started = time.perf_counter()
     vertices = await anyio.to_thread.run_sync(models.reconstruct, union.eigenvalues, union.sigma)
     INFERENCE.labels("decoder").observe(time.perf_counter() - started)
-    mesh, eigenvalues = await _solved(request, models, vertices)
+    mesh, eigenvalues = await solved_body(request, models, vertices)
     gap = spectrum_gap(eigenvalues, union.eigenvalues)
     return RebuiltBody(vertices, mesh, eigenvalues, gap, round_trip(gap, union))
 
@@ -92,10 +92,11 @@ async def scanned_body(request: Request, models: SpectralModels, outcome: UnionO
     every operand is an upload placed on the template and a body fits them (decision 039: 5 views
     ~10 mm where their union's spectrum decodes to ~75); else decoded from the union (the models
     must then have a decoder)."""
-    uploads = [operand.part for operand in outcome.operands]
-    if models.body is None or not outcome.placed or len(outcome.placed) != len(uploads) or None in uploads:
+    parts = [operand.part for operand in outcome.operands]
+    every_upload_placed = all(part is not None for part in parts) and len(outcome.placed) == len(parts)
+    if models.body is None or not every_upload_placed:
         return await rebuilt_body(request, models, outcome.result)
-    geometry = [view_of_part(part) for part in uploads if part is not None]
+    geometry = [view_of_part(part) for part in parts if part is not None]
     places = [placed.placement.position for placed in outcome.placed]
     try:
         fitted = await anyio.to_thread.run_sync(
@@ -107,13 +108,13 @@ async def scanned_body(request: Request, models: SpectralModels, outcome: UnionO
         decoded = await rebuilt_body(request, models, outcome.result)
         return replace(decoded, not_fitted=str(exc))
     vertices = fitted.vertices(models.body)
-    mesh, eigenvalues = await _solved(request, models, vertices)
+    mesh, eigenvalues = await solved_body(request, models, vertices)
     gap = spectrum_gap(eigenvalues, outcome.result.eigenvalues)
-    sigma = fitted.vertex_sigma(models.body) * models.body.scales(len(geometry))[0]
+    sigma = calibrated_sigma(models.body, fitted, len(geometry))
     return RebuiltBody(vertices, mesh, eigenvalues, gap, "fitted", "fitted", sigma)
 
 
-async def _solved(request: Request, models: SpectralModels, vertices: np.ndarray) -> tuple[bytes, np.ndarray]:
+async def solved_body(request: Request, models: SpectralModels, vertices: np.ndarray) -> tuple[bytes, np.ndarray]:
     """A body's PLY and its own spectrum, solved on the solver pool."""
     mesh = await anyio.to_thread.run_sync(body_mesh, models, vertices)
     solver: SolverPool = request.app.state.solver

@@ -2,11 +2,14 @@
 answer (``/v1/localize`` and ``/v1/reconstruct`` extend it) and the problems every union-based
 route can answer, the models' version field, and the media type of ``.npz`` answers."""
 
+from dataclasses import asdict
 from typing import Literal
 
 from pydantic import BaseModel, Field
 
 from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
+from app.retrieval.store import Match
+from app.sessions.identity import ahead_warning, ranked_people
 
 NPZ_MEDIA_TYPE = "application/x-npz"  # numpy's zip of NPY arrays; np.load reads it
 # What the union-based routes can answer: an upload's problems, and the models'.
@@ -88,3 +91,14 @@ class PersonAnswer(BaseModel):
         "sessions (how often the first person is the one scanned: the model card's bodies section); null for "
         "rankings it was not calibrated on."
     )
+
+
+def answered_people(matches: list[Match], top: int, scale: float | None) -> tuple[list[PersonAnswer], list[str]]:
+    """The ``top`` people of ``matches``, one per label (:func:`app.sessions.identity.ranked_people`),
+    with their confidence at ``scale`` (None: the ranking has no calibrated confidence, answered
+    null), and the warning when the first is not clearly ahead."""
+    people = [
+        PersonAnswer(**(asdict(person) | ({} if scale is not None else {"confidence": None})))
+        for person in ranked_people(matches, top, scale or 1.0)
+    ]
+    return people, ahead_warning(people[0].confidence if people else None)

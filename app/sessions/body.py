@@ -92,6 +92,12 @@ def fitted_session(basis: BodyBasis, template: np.ndarray, views: list[SessionVi
     return fitted_views(basis, template, [view.geometry for view in views], [view.places for view in views], registered)
 
 
+def calibrated_sigma(basis: BodyBasis, fitted: FittedBody, views: int) -> np.ndarray:
+    """(V,) each vertex's σ (m) of a body fitted to ``views`` views, scaled as the calibration
+    found for that many."""
+    return fitted.vertex_sigma(basis) * basis.scales(views)[0]
+
+
 def session_body(
     basis: BodyBasis,
     measurer: Measurer,
@@ -101,7 +107,7 @@ def session_body(
 ) -> SessionBody:
     """The session's body and measurements; ``coverage``: each body part's covered share."""
     fitted = fitted_session(basis, measurer.template.vertices, views, registered)
-    sigma_scale, spread_scale = basis.scales(len(views))
+    spread_scale = basis.scales(len(views))[1]
     vertices = fitted.vertices(basis)
     values = measurer.measure(vertices)
     drawn = [measurer.measure(body) for body in fitted.samples(basis, SAMPLES, np.random.default_rng(SEED))]
@@ -116,4 +122,5 @@ def session_body(
             spread = np.std([d[name] for d in drawn if d[name] is not None]) * spread_scale
             half = INTERVAL_Z * float(spread)
             measurements.append(Measurement(name, value, value - half, value + half))
-    return SessionBody(vertices, fitted.vertex_sigma(basis) * sigma_scale, measurements, not_measured, fitted)
+    sigma = calibrated_sigma(basis, fitted, len(views))
+    return SessionBody(vertices, sigma, measurements, not_measured, fitted)

@@ -101,6 +101,14 @@ def session_cover(views: list[SessionView]) -> Cover | None:
     return united([view.located.cover for view in views]) if views else None
 
 
+def session_coverage(models: SpectralModels, views: list[SessionView]) -> dict[str, float]:
+    """Each body part's covered share by the views together (none before the first view)."""
+    cover = session_cover(views)
+    if cover is None:
+        return {}
+    return models.region_of(cover.region, cover.share).part_coverage
+
+
 def least_covered(coverage: dict[str, float], count: int = LEAST_COVERED) -> list[str]:
     """The ``count`` body parts least covered, least first (ties by name): what to scan next."""
     return [name for name, _ in sorted(coverage.items(), key=lambda item: (item[1], item[0]))[:count]]

@@ -1,9 +1,13 @@
 """A live app per test module, with the lifespan run (TestClient inside ``with``)."""
 
+import shutil
+from pathlib import Path
+
 import pytest
 from fastapi.testclient import TestClient
 
 from app.core.config import Settings
+from app.inference.manifest import write_manifest
 from app.main import create_app
 
 UPLOAD_CAP = 2_000_000
@@ -18,6 +22,16 @@ def settings_for(database) -> Settings:
         database_path=database,
         api_key=API_KEY,
     )
+
+
+def settings_without(tmp_path: Path, artefact: str) -> Settings:
+    """Test settings serving a copy of the models without one optional ``artefact`` (and its
+    manifest without it): what a models folder that never had it serves."""
+    models = tmp_path / "models"
+    shutil.copytree(Settings().models_dir, models)
+    (models / artefact).unlink()
+    write_manifest(models)
+    return settings_for(tmp_path / "shapes.sqlite").model_copy(update={"models_dir": models})
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,6 @@ correspondence graph answers as before (501 here, the spectral localizer there).
 
 import io
 import json
-import shutil
 
 import numpy as np
 import pytest
@@ -18,11 +17,10 @@ from scipy.spatial.transform import Rotation
 
 from app.contract import CORRESPONDENCE_FILE
 from app.core.config import Settings
-from app.inference.manifest import write_manifest
 from app.inference.template import PART_NAMES, Template
 from app.main import create_app
 from app.samples import PARTS, template_part
-from tests.api.conftest import settings_for
+from tests.api.conftest import settings_for, settings_without
 from tests.builders import ascii_ply
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
@@ -213,11 +211,7 @@ def test_a_union_names_the_upload_whose_places_are_uncertain(client, samples, un
 
 
 def test_without_the_graph_the_service_answers_as_before(tmp_path, samples):
-    models = tmp_path / "models"
-    shutil.copytree(Settings().models_dir, models)
-    (models / CORRESPONDENCE_FILE).unlink()
-    write_manifest(models)
-    settings = settings_for(tmp_path / "shapes.sqlite").model_copy(update={"models_dir": models})
+    settings = settings_without(tmp_path, CORRESPONDENCE_FILE)
     with TestClient(create_app(settings)) as client:
         name = "no_head_neck.ply"
         missing = _correspond(client, name, samples[name])

@@ -7,7 +7,6 @@ eigenvalue raised), and ranked as it is the nearest stored shapes are the smalle
 
 import io
 import json
-import shutil
 
 import numpy as np
 import pytest
@@ -19,10 +18,9 @@ from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
 from app.geometry.topology import drop_unreferenced
-from app.inference.manifest import write_manifest
 from app.inference.template import PART_NAMES, Template
 from app.main import create_app
-from tests.api.conftest import API_KEY, settings_for
+from tests.api.conftest import API_KEY, settings_without
 from tests.api.test_union_api import LEGS
 from training.reconstruction.blind_spots import above_soles
 
@@ -95,11 +93,7 @@ def test_half_a_body_is_ranked_through_its_rebuilt_body_and_said_to_be_no_identi
 
 
 def test_models_without_a_decoder_rank_an_open_surface_as_it_is_and_say_so(tmp_path, without_soles):
-    models = tmp_path / "models"
-    shutil.copytree(Settings().models_dir, models)
-    (models / RECONSTRUCTION_FILE).unlink()
-    write_manifest(models)
-    settings = settings_for(tmp_path / "shapes.sqlite").model_copy(update={"models_dir": models})
+    settings = settings_without(tmp_path, RECONSTRUCTION_FILE)
     with TestClient(create_app(settings)) as other:
         answer = retrieve(other, without_soles)
     assert answer["ranked_by"] == "union" and answer["looked_up"] == pytest.approx(without_soles)

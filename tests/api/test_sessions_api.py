@@ -3,7 +3,6 @@ exact union's spectrum for registered views, the learned chain's for the others)
 and what to scan next; a bad view, a full or a missing session are clear problems that leave the
 session as it was."""
 
-import shutil
 from dataclasses import replace
 
 import numpy as np
@@ -15,12 +14,11 @@ from scipy.spatial.transform import Rotation
 from app.contract import BODY_FILE, SESSIONS_FILE
 from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
-from app.inference.manifest import write_manifest
 from app.inference.template import PART_NAMES, Template
 from app.main import create_app
 from app.samples import SESSION_SCANS, template_part
 from app.sessions.calibration import SessionCalibration
-from tests.api.conftest import API_KEY, settings_for
+from tests.api.conftest import API_KEY, settings_for, settings_without
 from tests.api.test_union_api import PROBLEM, region
 
 HEAD_SIDE, LEG_SIDE = SESSION_SCANS  # head, torso and left arm; torso, hips and right leg
@@ -275,11 +273,7 @@ def test_models_without_a_body_basis_say_so(tmp_path, client):
     """The served models fit bodies and say so; a models folder without body.npz (not in its
     manifest) says it does not, and a session's body is a 501 problem there."""
     assert client.get("/v1/models").json()["body"] is True
-    models = tmp_path / "models"
-    shutil.copytree(Settings().models_dir, models)
-    (models / BODY_FILE).unlink()
-    write_manifest(models)
-    settings = settings_for(tmp_path / "db.sqlite").model_copy(update={"models_dir": models})
+    settings = settings_without(tmp_path, BODY_FILE)
     with TestClient(create_app(settings)) as bare:
         assert bare.get("/v1/models").json()["body"] is False
         session = bare.post("/v1/sessions", json={"registered": True}).json()["id"]

@@ -25,13 +25,13 @@ from app.inference.models import SpectralModels
 from app.sessions.body import NoBodyFits, SessionBody, session_body
 from app.sessions.fused import fused_spectrum
 from app.sessions.identity import SHAPES_PER_PERSON, ranked_people
-from app.sessions.session import SessionView, session_cover, session_union
+from app.sessions.session import SessionView, session_coverage, session_union
 from training.glance import CARD, update_glance
 from training.learning.card import replace_block
-from training.reconstruction.evaluate import rigidly_aligned
+from training.reconstruction.evaluate import closed_spectrum, rigidly_aligned
 from training.reconstruction.export import decoder_basis
 from training.sessions.body_card import BEGIN, END, render
-from training.sessions.identities import Gallery, closed_spectrum, fitted_scale, rank_of
+from training.sessions.identities import Gallery, fitted_scale, rank_of
 from training.sessions.reading import moved, session_views
 from training.sessions.scans import VARIANTS, Person, people, test_c_people
 
@@ -54,12 +54,9 @@ def body_basis(models: Path) -> BodyBasis:
     return BodyBasis(mean.reshape(-1, 3), components.reshape(len(components), -1, 3), weights)
 
 
-def _fitted(
-    served: SpectralModels, basis: BodyBasis, views: list[SessionView], registered: bool
-) -> tuple[SessionBody, dict[str, float]]:
-    cover = session_cover(views)
-    coverage = served.region_of(cover.region, cover.share).part_coverage
-    return session_body(basis, Measurer.of(served.template), views, registered, coverage), coverage
+def _fitted(served: SpectralModels, basis: BodyBasis, views: list[SessionView], registered: bool) -> SessionBody:
+    """The body and measurements ``/v1/sessions/{id}/body`` answers for ``views``, with ``basis``."""
+    return session_body(basis, served.measurer, views, registered, session_coverage(served, views))
 
 
 def _scores(body: SessionBody, person: Person, measurer: Measurer, basis: BodyBasis) -> dict:
@@ -93,7 +90,7 @@ def _sessions(
     UNREGISTERED_LENGTH), scored, and ranked against ``gallery``; a session whose views did not
     come together is counted, not scored."""
     faces = served.template.faces
-    measurer = Measurer.of(served.template)
+    measurer = served.measurer  # the served models hold the basis being calibrated, so their measurer too
     rows = []
     for number, person in enumerate(found):
         ceiling = gallery.person_distances(closed_spectrum(person.rest, faces, served.k))
@@ -105,7 +102,7 @@ def _sessions(
                 prefix = views[:length]
                 row = {"views": length, "variant": variant, "registered": True}
                 try:
-                    body, _ = _fitted(served, basis, prefix, registered=True)
+                    body = _fitted(served, basis, prefix, registered=True)
                 except NoBodyFits:  # answered 409 body-not-fitted: counted, not scored
                     rows.append(row | {"fitted": False})
                     continue
@@ -117,7 +114,7 @@ def _sessions(
             sent = [replace(view, geometry=frame) for view, frame in zip(prefix, frames, strict=True)]
             row = {"views": len(sent), "variant": variant, "registered": False}
             try:
-                body, _ = _fitted(served, basis, sent, registered=False)
+                body = _fitted(served, basis, sent, registered=False)
             except NoBodyFits:  # answered 409 body-not-fitted: counted, not scored
                 rows.append(row | {"fitted": False})
                 continue

@@ -12,8 +12,6 @@ from pathlib import Path
 
 import numpy as np
 
-from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
-from app.geometry.shapes import Mesh
 from app.retrieval.distance import distances
 from app.retrieval.seed import SEED_FILE
 from app.retrieval.store import Match, ShapeRecord
@@ -48,11 +46,6 @@ class Gallery:
         for label, distance in zip(self.labels, found, strict=True):
             best[label] = min(best.get(label, np.inf), float(distance))
         return best
-
-
-def closed_spectrum(vertices: np.ndarray, faces: np.ndarray, k: int) -> np.ndarray:
-    """A body's own closed spectrum, as the service solves the body it fits."""
-    return np.asarray(mesh_spectrum(Mesh(vertices, faces), SpectrumOptions(k=k)).eigenvalues)
 
 
 def rank_of(person_distances: dict[str, float], label: str) -> int:

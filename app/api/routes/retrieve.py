@@ -18,7 +18,6 @@ first 60 → 74 % of the time among the closed ones, 57 → 70 % over all of the
 the true share, 77 %; ``benchmarks.retrieval_open_surfaces``).
 """
 
-from dataclasses import asdict
 from typing import Annotated, Literal
 
 import anyio
@@ -31,13 +30,13 @@ from app.api.examples import success
 from app.api.operands import CapHolesQuery
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.api.rebuilt import RebuiltBody, scanned_body
-from app.api.responses import PersonAnswer
+from app.api.responses import PersonAnswer, answered_people
 from app.api.unions import UnionDep, UnionOutcome
 from app.contract import PROFILE_SHARES
 from app.inference.body import open_surface
 from app.inference.models import SpectralModels
 from app.retrieval.store import Match, ShapeStore
-from app.sessions.identity import SHAPES_PER_PERSON, ahead_warning, ranked_people
+from app.sessions.identity import SHAPES_PER_PERSON
 
 router = APIRouter(tags=["retrieval"])
 ROUTE = "/retrieve"  # an open surface's query solves the body rebuilt from it: admitted like an upload (app.main)
@@ -146,16 +145,13 @@ def match_out(match: Match, ranked_by: RankedBy) -> MatchOut:
 
 async def ranked(
     store: ShapeStore, looked_up: np.ndarray, ranked_by: RankedBy, top: int, scale: float | None
-) -> tuple[list[MatchOut], list[PersonAnswer], np.ndarray]:
+) -> tuple[list[MatchOut], list[PersonAnswer], list[str], np.ndarray]:
     """The ``top`` matches, the ``top`` people (confidences with ``scale``, where calibrated for this
-    ranking), and the spectrum the first match was found by."""
+    ranking) and whether the first is clearly ahead, and the spectrum the first match was found by."""
     matches = await anyio.to_thread.run_sync(store.nearest, looked_up, top * SHAPES_PER_PERSON)
     first = np.atleast_2d(looked_up)[matches[0].query] if matches else np.atleast_2d(looked_up)[0]
-    people = [
-        PersonAnswer(**(asdict(person) | ({} if scale is not None else {"confidence": None})))
-        for person in ranked_people(matches, top, scale or 1.0)
-    ]
-    return [match_out(m, ranked_by) for m in matches[:top]], people, first
+    people, ahead = answered_people(matches, top, scale)
+    return [match_out(m, ranked_by) for m in matches[:top]], people, ahead, first
 
 
 @router.post(
@@ -189,12 +185,12 @@ async def retrieve(
     outcome = await union.solved(cap_holes=cap_holes, locate=models.body is not None)
     looked_up, ranked_by, notes = await looked_up_spectra(union.request, models, outcome, rebuild, profile)
     scale = models.body.identity_scale if ranked_by == "fitted_body" and models.body is not None else None
-    matches, people, first = await ranked(store, looked_up, ranked_by, top, scale)
+    matches, people, ahead, first = await ranked(store, looked_up, ranked_by, top, scale)
     return RetrieveResponse(
         query=outcome.result.eigenvalues.tolist(),
         ranked_by=ranked_by,
         looked_up=first.tolist(),
         matches=matches,
         people=people,
-        warnings=[*outcome.warnings, *notes, *ahead_warning(people[0].confidence if people else None)],
+        warnings=[*outcome.warnings, *notes, *ahead],
     )

@@ -8,28 +8,25 @@ A fit costs a few seconds of one core whatever the session holds (it reads at mo
 """
 
 from collections.abc import Callable
-from dataclasses import asdict
 from typing import Annotated, Literal, TypeVar
 
 import anyio
-import numpy as np
 from fastapi import APIRouter, Query, Request
 from pydantic import BaseModel, Field
 
 from app.api.deps import ModelsDep, SessionsDep, StoreDep
 from app.api.examples import success
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, ProblemError, problem_responses
-from app.api.rebuilt import body_mesh
-from app.api.responses import MODEL_VERSION_FIELD, PersonAnswer
+from app.api.rebuilt import solved_body
+from app.api.responses import MODEL_VERSION_FIELD, PersonAnswer, answered_people
 from app.api.routes.sessions import ROUTE, SESSION_SLUGS, SessionId, not_found
-from app.geometry.pipeline import SpectrumOptions
 from app.inference.bodyfit import FittedBody, NotEnoughSeen
 from app.inference.models import SpectralModels
 from app.sessions.body import SEEN, NoBodyFits, SessionBody, fitted_session, session_body
-from app.sessions.identity import SHAPES_PER_PERSON, ahead_warning, ranked_people
+from app.sessions.identity import SHAPES_PER_PERSON
 from app.sessions.reading import SessionState, session_state
 from app.sessions.records import SessionNotFound
-from app.sessions.session import session_cover
+from app.sessions.session import session_coverage
 from app.sessions.store import SessionStore
 
 T = TypeVar("T")
@@ -116,19 +113,17 @@ async def session_identity_route(
     with a calibrated confidence."""
     state = await _session(request, models, sessions, session_id)
     fitted = await _fit(_fitted, models, state)
-    mesh = await anyio.to_thread.run_sync(body_mesh, models, fitted.vertices(models.body))
-    report = await request.app.state.solver.solve(mesh, "ply", SpectrumOptions(k=models.k))
-    spectrum = np.asarray(report.eigenvalues, dtype=np.float64)
+    _, spectrum = await solved_body(request, models, fitted.vertices(models.body))
     matches = await anyio.to_thread.run_sync(store.nearest, spectrum, top * SHAPES_PER_PERSON)
-    people = ranked_people(matches, top, models.body.identity_scale)
+    people, ahead = answered_people(matches, top, models.body.identity_scale)
     return IdentityAnswer(
         id=session_id,
         model_version=models.version,
         views=len(state.views),
         ranked_by="fitted_body",
         looked_up=spectrum.tolist(),
-        people=[PersonAnswer(**asdict(person)) for person in people],
-        warnings=ahead_warning(people[0].confidence if people else None),
+        people=people,
+        warnings=ahead,
     )
 
 
@@ -142,24 +137,22 @@ async def _session(request: Request, models: SpectralModels, sessions: SessionSt
 
 
 async def _fit(fit: Callable[[SpectralModels, SessionState], T], models: SpectralModels, state: SessionState) -> T:
-    """``fit`` run off the event loop; a session it cannot fit a body to is a 409."""
+    """``fit`` run off the event loop; a session it cannot fit a body to (none of its views yet,
+    too few points, views no body fits) is a 409."""
     try:
+        if not state.views:
+            raise NotEnoughSeen("the session has no view yet")
         return await anyio.to_thread.run_sync(fit, models, state)
     except (NotEnoughSeen, NoBodyFits) as exc:
         raise ProblemError(409, "body-not-fitted", "No body fitted to this session", str(exc)) from None
 
 
 def _fitted(models: SpectralModels, state: SessionState) -> FittedBody:
-    if not state.views:
-        raise NotEnoughSeen("the session has no view yet")
     return fitted_session(models.body, models.template.vertices, state.views, state.meta.registered)
 
 
 def _measured(models: SpectralModels, state: SessionState) -> SessionBody:
-    if not state.views:
-        raise NotEnoughSeen("the session has no view yet")
-    cover = session_cover(state.views)
-    coverage = models.region_of(cover.region, cover.share).part_coverage
+    coverage = session_coverage(models, state.views)
     return session_body(models.body, models.measurer, state.views, state.meta.registered, coverage)
 
 
