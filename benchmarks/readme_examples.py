@@ -26,7 +26,7 @@ from pathlib import Path
 
 from app.core.config import Settings
 from app.geometry.overlap import TOKEN_PREFIX
-from app.inference.cover import REGION_TOKEN_PREFIX
+from app.inference.region_tokens import PREFIX as REGION_TOKEN_PREFIX
 from app.inference.template import Template
 from app.samples import sample_overlap, write_samples
 

@@ -12,6 +12,7 @@ from app.api.operands import Told, told_query
 from app.api.problems import ProblemError
 from app.core.config import Settings
 from app.inference.models import SpectralModels
+from app.inference.region_tokens import RegionTokens
 from app.retrieval.store import ShapeStore
 from app.sessions.store import SessionStore
 
@@ -49,6 +50,14 @@ async def usable_sessions(request: Request) -> SessionStore:
 
 
 SessionsDep = Annotated[SessionStore, Depends(usable_sessions)]
+
+
+async def region_tokens(request: Request) -> RegionTokens:
+    """What signs and reads region tokens (503 when its key cannot be read from the database)."""
+    return await request.app.state.resources.region_tokens()
+
+
+TokensDep = Annotated[RegionTokens, Depends(region_tokens)]
 # The union routes' overlap, boundary and measure_overlap query parameters, as one.
 ToldDep = Annotated[Told, Depends(told_query)]
 

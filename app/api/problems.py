@@ -81,7 +81,18 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
         ("invalid-spectrum", "Invalid spectrum", "spectra[1] is not in ascending order"),
         ("invalid-overlap", "Invalid overlap", "2 overlaps for 2 operands: give one per union step (1)"),
         ("invalid-region", "Invalid region", "regions[0] holds 1528 bits, not this template's 12167 vertices"),
+        (
+            "untrusted-region",
+            "Region token not trusted",
+            "regions[1] was issued for another part's spectrum than the one sent with it",
+        ),
         ("invalid-geometry", "Invalid geometry", "files[0] scan.ply: 1 vertices have NaN or infinite coordinates"),
+        (
+            "implausible-size",
+            "No body part is this size",
+            "files[0] scan.ply: the shape's area is 1.39e+06 m², outside the 0.01–10 m² of a human scan; read in mm "
+            "it would be 1.39 m² (units=mm): not placed on the body",
+        ),
         ("invalid-request", "Invalid request", "query.top: Input should be less than or equal to 100"),
         (
             "too-many-faces",
@@ -146,7 +157,14 @@ UPLOAD_SLUGS = frozenset(
     }
 )
 MODEL_SLUGS = frozenset(
-    {"invalid-spectrum", "invalid-overlap", "invalid-region", "models-unavailable"}
+    {
+        "invalid-spectrum",
+        "invalid-overlap",
+        "invalid-region",
+        "untrusted-region",
+        "implausible-size",
+        "models-unavailable",
+    }
 )  # routes that run the models
 DATABASE_SLUGS = frozenset({"database-unavailable"})  # routes that read or write the store
 

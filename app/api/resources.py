@@ -12,9 +12,12 @@ from app.api.problems import RETRY_AFTER_UNAVAILABLE, ProblemError
 from app.contract import MAX_HOLE_EDGES
 from app.core.config import Settings
 from app.inference.models import SpectralModels
+from app.inference.region_tokens import RegionTokens
 from app.retrieval.seed import open_store
 from app.retrieval.store import ShapeStore, StoreUnavailable
 from app.sessions.store import SessionStore, open_sessions
+
+TOKEN_KEY = "region-tokens"  # the database's key region tokens are signed with, when none is configured
 
 
 class Resources:
@@ -25,6 +28,7 @@ class Resources:
         self._store: ShapeStore | None = None
         self.store_problem = "not opened yet"
         self._sessions: SessionStore | None = None
+        self._tokens: RegionTokens | None = None
 
     def open(self) -> None:
         """Open both at start-up; failures are recorded, not raised."""
@@ -71,6 +75,20 @@ class Resources:
         if self._store is None:
             raise StoreUnavailable(self.store_problem)  # answered as 503 database-unavailable
         return self._store
+
+    async def region_tokens(self) -> RegionTokens:
+        """What signs and reads region tokens: under the configured keys, else the database's own
+        (503 database-unavailable while it cannot be read)."""
+        if self._tokens is None:
+            models = self.require_models()
+            configured = self.settings.region_token_keys
+            if configured is not None:
+                keys = [key.strip().encode() for key in configured.get_secret_value().split(",")]
+            else:
+                sessions = await self.require_sessions()
+                keys = [await anyio.to_thread.run_sync(sessions.service_key, TOKEN_KEY)]
+            self._tokens = RegionTokens(keys, models.version)
+        return self._tokens
 
     async def require_sessions(self) -> SessionStore:
         """The scanning sessions' store (the shape store's database), opened again if it was down."""

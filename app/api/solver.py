@@ -38,6 +38,7 @@ from app.api.metrics import SOLVES
 from app.api.problems import ProblemError
 from app.core.errors import InputError
 from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport, solve_bytes
+from app.geometry.plausibility import placeable_size
 from app.inference.correspondence import places_in_worker
 from app.sessions.aligned import aligned_spectrum
 from app.sessions.fused import View, fused_spectrum
@@ -92,11 +93,13 @@ def _solve_task(
     too, or not, by how far the large solve had got. The new error is raised once the handler
     has let the old one go, so the worker is back at its idle size when it answers. With
     ``place_with`` (the correspondence graph's path) the part is placed here too (its places
-    ``relaxed`` where asked), under the same cap and deadline.
+    ``relaxed`` where asked), under the same cap and deadline, if no unit slip is plain in its size.
     """
     try:
         placing = place_with is not None
         solved = solve_bytes(data, file_type, options, vectors=vectors, footprint=footprint, descriptors=placing)
+        if placing:
+            placeable_size(solved.report.area_m2, solved.report.scale_to_metres)
         return replace(solved, places=places_in_worker(place_with, solved.part, relaxed)) if placing else solved
     except MemoryError:
         pass

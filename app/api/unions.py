@@ -13,7 +13,7 @@ import numpy as np
 from fastapi import Depends, Request
 
 from app.api import form_json
-from app.api.deps import ModelsDep, SettingsDep, ToldDep
+from app.api.deps import ModelsDep, SettingsDep, ToldDep, region_tokens
 from app.api.metrics import INFERENCE
 from app.api.operands import (
     NOT_TOLD,
@@ -31,7 +31,7 @@ from app.core.config import Settings
 from app.geometry.overlap import measured_fold
 from app.geometry.plausibility import size_warnings
 from app.inference.correspondence import PlacedPart
-from app.inference.cover import Cover, InvalidRegion, region_from_token
+from app.inference.cover import Cover, InvalidRegion
 from app.inference.models import (
     InvalidOverlap,
     SpectralModels,
@@ -40,6 +40,7 @@ from app.inference.models import (
     checked_overlaps,
     require_overlap_reader,
 )
+from app.inference.region_tokens import RegionTokens
 from app.sessions.chain import Located, template_fold
 
 # Where a union's overlaps came from: the client, registered views' footprints, or the parts'
@@ -107,7 +108,8 @@ async def union_of_operands(
     if told.measure:
         _check_measurable(overlaps, boundaries, spectra, models)
 
-    carried = _carried_regions(told.regions, spectra, models)
+    tokens = await region_tokens(request) if told.regions is not None else None
+    carried = _carried_regions(told.regions, spectra, models, tokens)
     if carried is not None and files and models.correspondence is None:
         raise InvalidRegion("these models cannot place uploaded files: send regions with spectra operands only")
     steps = bool(files) and len(files) + (len(carried) if carried else 0) > 1
@@ -195,17 +197,23 @@ def _doubts(models: SpectralModels, operands: list[Operand], placed: list[Placed
     ]
 
 
-def _carried_regions(text: str | None, spectra: str | None, models: SpectralModels) -> list[Cover] | None:
+def _carried_regions(
+    text: str | None, spectra: str | None, models: SpectralModels, signer: RegionTokens | None
+) -> list[Cover] | None:
     """The ``regions`` form field as one template cover per spectra operand (None when not
-    sent); checked before anything is solved."""
-    if text is None:
+    sent), each token read against the spectrum it is sent with; checked before anything is
+    solved."""
+    if text is None or signer is None:
         return None
     tokens = form_json.loads(text, "regions", InvalidRegion)
-    count = len(parse_spectra(spectra, models.k))
-    if not isinstance(tokens, list) or len(tokens) != count:
-        raise InvalidRegion(f"regions must be a JSON list of region tokens, one per spectra operand ({count})")
+    values = parse_spectra(spectra, models.k)
+    if not isinstance(tokens, list) or len(tokens) != len(values):
+        raise InvalidRegion(f"regions must be a JSON list of region tokens, one per spectra operand ({len(values)})")
     vertices = len(models.template.vertices)
-    return [region_from_token(token, vertices, f"regions[{i}]") for i, token in enumerate(tokens)]
+    return [
+        signer.read(token, np.asarray(spectrum), vertices, f"regions[{i}]")
+        for i, (token, spectrum) in enumerate(zip(tokens, values, strict=True))
+    ]
 
 
 def _check_measurable(

@@ -4,11 +4,13 @@ import os
 from functools import lru_cache
 from pathlib import Path
 
-from pydantic import Field, SecretStr
+from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from app.contract import MAX_HOLE_EDGES
 from app.geometry.placing import PLACED_VERTICES
+
+MIN_KEY_CHARACTERS = 16
 
 
 class Settings(BaseSettings):
@@ -44,6 +46,13 @@ class Settings(BaseSettings):
         None, pattern=r"^postgres(ql)?://", description="PostgreSQL URL; replaces the SQLite file (replicas share it)."
     )
     api_key: SecretStr | None = Field(None, description="Key for writes to /v1/shapes; writes are refused without.")
+    region_token_keys: SecretStr | None = Field(
+        None,
+        description="Comma-separated keys (16 characters or more) region tokens are signed with: the first signs, "
+        "every one is accepted. Rotate by putting a new key first and keeping the old one listed while clients may "
+        "still hold its tokens (at least the session time-to-live). Unset: one key the service makes and keeps in "
+        "its database, shared by replicas.",
+    )
     solver_concurrency: int = Field(
         default_factory=lambda: max(1, os.cpu_count() or 1),
         gt=0,
@@ -85,6 +94,16 @@ class Settings(BaseSettings):
     shutdown_grace_seconds: float = Field(
         30.0, gt=0, description="On SIGTERM, how long in-flight requests may take to finish before they are cancelled."
     )
+
+    @field_validator("region_token_keys")
+    @classmethod
+    def _keys_long_enough(cls, value: SecretStr | None) -> SecretStr | None:
+        """A short key is guessed: refused at start-up rather than signing with it."""
+        if value is not None:
+            keys = [key.strip() for key in value.get_secret_value().split(",")]
+            if not all(len(key) >= MIN_KEY_CHARACTERS for key in keys):
+                raise ValueError(f"every region token key needs {MIN_KEY_CHARACTERS} characters or more")
+        return value
 
 
 @lru_cache

@@ -6,10 +6,11 @@ boundaries and IoU are measured on) and each vertex's covered share (how much of
 around it the part's area fills: what per-body-part coverage sums, so that a ragged camera view
 is not counted as the whole area between its strips).
 
-A token carries both, so that a session which sends spectra with their tokens, instead of its
-scans again, reads the same coverage: the region bit-packed, then the share in sixteenths, two
-vertices a byte (~10 KB of text for the 12 167-vertex template). Tokens of the earlier format
-(``region1:``, the region alone) are still read, their share being the region itself.
+A cover is kept as bytes (:func:`cover_bytes`): the region bit-packed, then the share in
+sixteenths, two vertices a byte (~9 KB for the 12 167-vertex template). A stored session view
+keeps its cover so (as text, :func:`cover_text`); a client gets it signed and bound to its
+spectrum (:mod:`app.inference.region_tokens`), so that a session which sends spectra with their
+tokens, instead of its scans again, reads the same coverage and cannot be told another.
 """
 
 import base64
@@ -20,8 +21,7 @@ import numpy as np
 
 from app.core.errors import InputError
 
-REGION_TOKEN_PREFIX = "region2:"
-REGION_ONLY_PREFIX = "region1:"
+COVER_TEXT_PREFIX = "region2:"
 SHARE_LEVELS = 15  # a share is sent as round(share · 15): 4 bits
 
 
@@ -50,31 +50,19 @@ class InvalidRegion(InputError):
     title = "Invalid region"
 
 
-def region_token(cover: Cover) -> str:
-    """A cover as text a client keeps and sends back (``regions``)."""
+def cover_bytes(cover: Cover) -> bytes:
+    """A cover as bytes: the region bit-packed, then the shares in sixteenths, two a byte."""
     levels = np.rint(np.clip(cover.share, 0.0, 1.0) * SHARE_LEVELS).astype(np.uint8)
     if len(levels) % 2:
         levels = np.append(levels, 0)
     nibbles = (levels[0::2] << 4) | levels[1::2]
-    payload = np.packbits(cover.region).tobytes() + nibbles.astype(np.uint8).tobytes()
-    return REGION_TOKEN_PREFIX + base64.b64encode(payload).decode("ascii")
+    return np.packbits(cover.region).tobytes() + nibbles.astype(np.uint8).tobytes()
 
 
-def region_from_token(token: object, vertices: int, name: str) -> Cover:
-    """The cover of :func:`region_token`'s text (or of an earlier region-only token);
-    InvalidRegion naming ``name`` when it is not a token of a template of this many vertices, or
-    holds no vertex."""
-    prefix = next(
-        (p for p in (REGION_TOKEN_PREFIX, REGION_ONLY_PREFIX) if isinstance(token, str) and token.startswith(p)), None
-    )
-    if prefix is None:
-        raise InvalidRegion(f"{name} is not a region token (they start with {REGION_TOKEN_PREFIX!r})")
-    try:
-        payload = base64.b64decode(token[len(prefix) :], validate=True)
-    except binascii.Error:
-        raise InvalidRegion(f"{name} is not valid base64") from None
-    bits = (vertices + 7) // 8
-    shares = (vertices + 1) // 2 if prefix == REGION_TOKEN_PREFIX else 0
+def cover_of_bytes(payload: bytes, vertices: int, name: str) -> Cover:
+    """The cover of :func:`cover_bytes`; InvalidRegion naming ``name`` when it is not a cover of
+    a template of this many vertices, or holds no vertex."""
+    bits, shares = (vertices + 7) // 8, (vertices + 1) // 2
     if len(payload) != bits + shares:
         raise InvalidRegion(
             f"{name} holds {len(payload)} bytes, not the {bits + shares} of this template's {vertices} vertices"
@@ -82,8 +70,22 @@ def region_from_token(token: object, vertices: int, name: str) -> Cover:
     region = np.unpackbits(np.frombuffer(payload[:bits], np.uint8), count=vertices).astype(bool)
     if not region.any():
         raise InvalidRegion(f"{name} is an empty region")
-    if not shares:
-        return Cover.of_region(region)
     nibbles = np.frombuffer(payload[bits:], np.uint8)
     levels = np.column_stack([nibbles >> 4, nibbles & 0x0F]).ravel()[:vertices]
     return Cover(region, levels / SHARE_LEVELS)
+
+
+def cover_text(cover: Cover) -> str:
+    """A cover as the text a stored view keeps it by (not for clients: unsigned)."""
+    return COVER_TEXT_PREFIX + base64.b64encode(cover_bytes(cover)).decode("ascii")
+
+
+def cover_of_text(text: str, vertices: int, name: str) -> Cover:
+    """The cover of :func:`cover_text`'s text."""
+    if not text.startswith(COVER_TEXT_PREFIX):
+        raise InvalidRegion(f"{name} is not a stored cover")
+    try:
+        payload = base64.b64decode(text[len(COVER_TEXT_PREFIX) :], validate=True)
+    except binascii.Error:
+        raise InvalidRegion(f"{name} is not valid base64") from None
+    return cover_of_bytes(payload, vertices, name)

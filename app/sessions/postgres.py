@@ -37,6 +37,10 @@ SCHEMA = (
         warnings TEXT NOT NULL,
         PRIMARY KEY (session_id, position)
     )""",
+    """CREATE TABLE IF NOT EXISTS service_keys (
+        name TEXT PRIMARY KEY,
+        secret BYTEA NOT NULL
+    )""",
 )
 
 

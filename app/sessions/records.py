@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from app.inference.cover import region_from_token, region_token
+from app.inference.cover import cover_of_text, cover_text
 from app.inference.models import UnionEstimate
 from app.sessions.chain import Located
 from app.sessions.fused import View
@@ -62,7 +62,7 @@ def view_row(view: SessionView) -> tuple:
         view.source,
         np.asarray(view.eigenvalues, dtype=np.float64).tobytes(),
         buffer.getvalue(),
-        region_token(view.located.cover),
+        cover_text(view.located.cover),
         view.located.confidence,
         view.located.area,
         json.dumps(list(view.warnings)),
@@ -80,7 +80,7 @@ def view_of_row(row: tuple, template_vertices: int) -> SessionView:
             arrays["edges"].astype(np.int64),
         )
         places = arrays["places"].astype(np.float64)
-    cover = region_from_token(region, template_vertices, "stored view")
+    cover = cover_of_text(region, template_vertices, "stored view")
     located = Located(cover, float(confidence), float(area))
     values = np.frombuffer(bytes(eigenvalues), dtype=np.float64).copy()
     return SessionView(source, values, view, places, located, tuple(json.loads(warnings)))

@@ -11,11 +11,12 @@ solve it again. Sessions untouched for longer than the time-to-live are gone: re
 and deleted with their views when the next session is made.
 """
 
+import secrets
 import sqlite3
 import time
 import uuid
 from collections.abc import Iterator
-from contextlib import AbstractContextManager, contextmanager
+from contextlib import AbstractContextManager, closing, contextmanager
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -57,7 +58,12 @@ SCHEMA = (
         warnings TEXT NOT NULL,
         PRIMARY KEY (session_id, position)
     )""",
+    """CREATE TABLE IF NOT EXISTS service_keys (
+        name TEXT PRIMARY KEY,
+        secret BLOB NOT NULL
+    )""",
 )
+KEY_BYTES = 32  # a service key: HMAC-SHA256's own size
 META_COLUMNS = "id, registered, units, scale, created_at, touched_at, views"
 
 
@@ -80,6 +86,11 @@ class SessionStore(Protocol):
     def cached_union(self, session_id: str, views: int, version: str) -> SessionUnion | None: ...
     def cache_union(self, session_id: str, views: int, version: str, union: SessionUnion) -> None: ...
     def delete(self, session_id: str) -> bool: ...
+    def service_key(self, name: str) -> bytes:
+        """The secret the service keeps under ``name`` in its database, made on first use: one
+        for every replica that shares the database."""
+        ...
+
     def close(self) -> None: ...
 
 
@@ -190,6 +201,15 @@ class SessionRows:
             self._run(connection, "DELETE FROM scan_session_views WHERE session_id = ?", (session_id,))
             return self._run(connection, "DELETE FROM scan_sessions WHERE id = ?", (session_id,)).rowcount > 0
 
+    def service_key(self, name: str) -> bytes:
+        with self._transaction() as connection:
+            self._run(
+                connection,
+                "INSERT INTO service_keys (name, secret) VALUES (?, ?) ON CONFLICT (name) DO NOTHING",
+                (name, secrets.token_bytes(KEY_BYTES)),
+            )
+            return bytes(self._run(connection, "SELECT secret FROM service_keys WHERE name = ?", (name,)).fetchone()[0])
+
 
 class SQLiteSessions(SessionRows):
     """Sessions in the service's SQLite file, beside the shape store's tables: every write takes
@@ -202,8 +222,12 @@ class SQLiteSessions(SessionRows):
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise StoreUnavailable(f"cannot create {path.parent}: {exc}") from exc
+        try:  # outside a transaction: SQLite changes the journal of a file only there
+            with closing(sqlite3.connect(path, timeout=30, isolation_level=None)) as connection:
+                connection.execute("PRAGMA journal_mode=WAL")
+        except sqlite3.OperationalError as exc:
+            raise StoreUnavailable(f"SQLite file {path}: {exc}") from exc
         with self._transaction() as connection:
-            connection.execute("PRAGMA journal_mode=WAL")
             for statement in SCHEMA:
                 connection.execute(statement)
 

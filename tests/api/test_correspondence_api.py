@@ -249,10 +249,9 @@ def test_spectra_sent_with_their_regions_are_placed_as_their_uploads(client, sam
     ("regions", "detail"),
     [
         ("not json", "regions"),
-        ('["region1:AAAA"]', "regions[0]"),
         ('["fp1.AAAA"]', "regions[0]"),
-        ('["region1:!!!"]', "regions[0]"),
-        ('["region2:AAAA"]', "regions[0]"),
+        ('["region3:!!!.AAAA"]', "regions[0]"),
+        ('["region3:AAAA.AAAA"]', "regions[0]"),
         ("[]", "one per spectra operand"),
     ],
 )
@@ -261,6 +260,29 @@ def test_bad_regions_get_a_problem_naming_them(client, regions, detail):
     answer = client.post("/v1/localize", data=form)
     assert answer.status_code == 422
     assert answer.json()["type"] == "/problems/invalid-region" and detail in answer.json()["detail"]
+
+
+def test_a_token_is_read_only_beside_the_spectrum_it_was_issued_for(client, samples):
+    """Tokens swapped between two placed parts, an unsigned one of an earlier format and one with a
+    changed byte are each refused (422 untrusted-region), not read as another part's region."""
+    first, second = [_correspond(client, name, data).json() for name, data in samples.items()][:2]
+    spectra = json.dumps([first["eigenvalues"], second["eigenvalues"]])
+    token = first["region"]["token"]
+    body, _, tag = token.partition(".")
+    changed = body[:-2] + ("A" if body[-2] != "A" else "B") + body[-1] + "." + tag
+    cases = {
+        "another part's spectrum": [second["region"]["token"], first["region"]["token"]],
+        "earlier format": ["region2:" + token.removeprefix("region3:"), second["region"]["token"]],
+        "altered or forged": [changed, second["region"]["token"]],
+    }
+    for reason, regions in cases.items():
+        answer = client.post("/v1/localize", data={"spectra": spectra, "regions": json.dumps(regions)})
+        assert answer.status_code == 422, reason
+        assert answer.json()["type"] == "/problems/untrusted-region" and reason in answer.json()["detail"]
+    kept = client.post(
+        "/v1/localize", data={"spectra": spectra, "regions": json.dumps([token, second["region"]["token"]])}
+    )
+    assert kept.status_code == 200 and kept.json()["located_by"] == "correspondence"
 
 
 @pytest.mark.parametrize("tell_below", [0.0, 1.01])
@@ -351,3 +373,17 @@ def test_uploads_are_placed_in_the_solver_worker_not_the_api_process(client, sam
     united = client.post("/v1/union", files=files)
     assert united.status_code == 200, united.text
     assert united.json()["overlaps_from"] == "correspondence"
+
+
+def test_a_part_in_the_wrong_units_is_not_placed_but_its_spectrum_is_answered(client, samples):
+    """A body part in metres sent as millimetres (a millionth of its area) is refused by the
+    placing routes, naming the unit that fits; its spectrum alone is still answered, warned."""
+    name, data = next(iter(samples.items()))
+    placed = client.post("/v1/correspondence", params={"units": "mm"}, files={"file": (name, data)})
+    assert placed.status_code == 422 and placed.json()["type"] == "/problems/implausible-size"
+    assert "(units=m)" in placed.json()["detail"]
+    files = [("files", (n, d)) for n, d in samples.items()]
+    united = client.post("/v1/union", params={"units": "mm"}, files=files)
+    assert united.status_code == 422 and united.json()["type"] == "/problems/implausible-size"
+    spectrum = client.post("/v1/spectrum", params={"units": "mm"}, files={"file": (name, data)})
+    assert spectrum.status_code == 200 and any("units=m" in w for w in spectrum.json()["warnings"])

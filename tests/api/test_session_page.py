@@ -209,18 +209,14 @@ def _parts_shown(browser, count: int) -> None:
     )
 
 
-def test_a_part_in_the_wrong_units_is_warned_of_and_can_be_removed(base, scans, browser):
-    """A scan in metres dropped as millimetres: the union's unit-slip warning is shown, and
-    removing the scan gives back the session as it was, coverage and all."""
+def test_a_part_in_the_wrong_units_is_refused_and_the_session_kept(base, scans, browser):
+    """A scan in metres dropped as millimetres is refused, the status naming the unit that fits,
+    and the session stays as it was, coverage and all; its scans can then be removed."""
     _drop_one_at_a_time(browser, base, scans)
-    assert not browser.find_elements(By.CSS_SELECTOR, "#warnings li")
     Select(browser.find_element(By.ID, "units")).select_by_value("mm")
     browser.find_element(By.ID, "file").send_keys(str(scans[0]))
-    _parts_shown(browser, 3)
-    warnings = [item.text for item in browser.find_elements(By.CSS_SELECTOR, "#warnings li")]
-    assert any("files[0]" not in text and "the size of" in text for text in warnings), warnings
-
-    browser.find_elements(By.CSS_SELECTOR, "#parts li button.remove")[2].click()
+    WebDriverWait(browser, 90).until(lambda b: "units=m" in b.find_element(By.ID, "status").text)
+    assert "No body part is this size" in browser.find_element(By.ID, "status").text
     _parts_shown(browser, 2)
     assert not browser.find_elements(By.CSS_SELECTOR, "#warnings li")
     expected = _expected_region(base, scans)

@@ -2,12 +2,11 @@
 client keeps it by.
 
 The truths: a region placed exactly, vertex on vertex, is covered in full inside and not at all
-far from it, and its shares sum to its own area (its coverage is its own, to a few per cent); a token gives back
-the cover it was made of (the share to its sixteenths); tokens of the region-only format still
-read as the region, fully covered; a token of another template, or of nothing, is refused.
+far from it, and its shares sum to its own area (its coverage is its own, to a few per cent); a
+cover's bytes give back the cover they were made of (the share to its sixteenths); a cover of
+another template, or of nothing, is refused.
 """
 
-import base64
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +16,7 @@ from scipy.spatial import cKDTree
 from app.geometry.laplacian import mesh_operators
 from app.geometry.topology import boundary_vertex_mask
 from app.inference.correspondence import TemplateRegions
-from app.inference.cover import REGION_ONLY_PREFIX, Cover, InvalidRegion, region_from_token, region_token, united
+from app.inference.cover import Cover, InvalidRegion, cover_bytes, cover_of_bytes, cover_of_text, cover_text, united
 from app.inference.template import Template
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
@@ -61,36 +60,28 @@ def test_a_region_placed_exactly_is_covered_by_its_own_area(regions, placed):
     assert np.all(cover.share[~mask][distance > 0.15] < 0.01)
 
 
-def test_a_token_gives_back_its_cover(placed):
+def test_a_stored_cover_gives_back_its_cover(placed):
     mask, cover = placed
-    back = region_from_token(region_token(cover), len(mask), "token")
+    back = cover_of_text(cover_text(cover), len(mask), "token")
     np.testing.assert_array_equal(back.region, cover.region)
     assert np.abs(back.share - cover.share).max() <= 0.5 / 15 + 1e-12
 
 
-def test_an_odd_template_s_token_gives_back_its_cover():
+def test_an_odd_template_s_cover_gives_back_its_cover():
     region = np.array([True, False, True, True, False])
     cover = Cover(region, np.array([1.0, 0.2, 0.6, 0.0, 1 / 15]))
-    back = region_from_token(region_token(cover), 5, "token")
+    back = cover_of_bytes(cover_bytes(cover), 5, "token")
     np.testing.assert_array_equal(back.region, region)
     np.testing.assert_allclose(back.share, [1.0, 3 / 15, 9 / 15, 0.0, 1 / 15])
 
 
-def test_a_region_only_token_reads_as_its_region_fully_covered():
-    region = np.array([True, False, True, True, False, False, False, False, True])
-    token = REGION_ONLY_PREFIX + base64.b64encode(np.packbits(region).tobytes()).decode("ascii")
-    back = region_from_token(token, len(region), "token")
-    np.testing.assert_array_equal(back.region, region)
-    np.testing.assert_array_equal(back.share, region.astype(float))
-
-
 @pytest.mark.parametrize("vertices", [8, 12])
-def test_a_token_of_another_template_or_of_nothing_is_refused(vertices):
+def test_a_cover_of_another_template_or_of_nothing_is_refused(vertices):
     cover = Cover.of_region(np.ones(10, bool))
     with pytest.raises(InvalidRegion, match="bytes"):
-        region_from_token(region_token(cover), vertices, "token")
+        cover_of_bytes(cover_bytes(cover), vertices, "token")
     with pytest.raises(InvalidRegion, match="empty"):
-        region_from_token(region_token(Cover.of_region(np.zeros(vertices, bool))), vertices, "token")
+        cover_of_bytes(cover_bytes(Cover.of_region(np.zeros(vertices, bool))), vertices, "token")
 
 
 def test_the_union_s_cover_is_the_union_of_regions_and_the_larger_share():

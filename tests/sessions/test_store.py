@@ -139,3 +139,11 @@ def test_an_ended_session_is_gone(store_for):
     assert store.delete(session) and not store.delete(session)
     with pytest.raises(SessionNotFound):
         store.views(session, TEMPLATE_VERTICES)
+
+
+def test_a_service_key_is_made_once_and_shared_by_every_opening(store_for):
+    """Two openings of one database (two replicas) read the same key; another name, another key."""
+    first, second = store_for(), store_for()
+    key = first.service_key("region-tokens")
+    assert len(key) == 32 and second.service_key("region-tokens") == key == first.service_key("region-tokens")
+    assert second.service_key("something-else") != key

@@ -9,7 +9,7 @@ import trimesh
 from fastapi import APIRouter, File, Form, Query, Request, Response, UploadFile
 from pydantic import BaseModel, Field
 
-from app.api.deps import ModelsDep, SettingsDep
+from app.api.deps import ModelsDep, SettingsDep, TokensDep
 from app.api.examples import success
 from app.api.metrics import INFERENCE
 from app.api.operands import ScaleQuery, UnitsQuery, upload_options
@@ -18,7 +18,6 @@ from app.api.responses import MODEL_VERSION_FIELD, NPZ_MEDIA_TYPE
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
 from app.geometry.pipeline import Solved
 from app.inference.correspondence import Placement
-from app.inference.cover import region_token
 from app.inference.models import SpectralModels
 
 router = APIRouter(tags=["correspondence"])
@@ -88,6 +87,7 @@ async def correspondence(
     request: Request,
     settings: SettingsDep,
     models: ModelsDep,
+    tokens: TokensDep,
     file: Annotated[UploadFile, File(description="Mesh or point cloud: " + ", ".join(sorted(ALLOWED_TYPES)))],
     units: UnitsQuery = "m",
     scale: ScaleQuery = None,
@@ -157,7 +157,7 @@ async def correspondence(
             vertices=covered.vertices.tolist(),
             area_fraction=covered.area_fraction,
             part_coverage=covered.part_coverage,
-            token=region_token(placed.cover),
+            token=tokens.issue(placed.cover, np.asarray(solved.report.eigenvalues)),
         ),
         template_vertices=len(models.template.vertices),
         warnings=solved.report.warnings + models.correspondence.doubts(placement),

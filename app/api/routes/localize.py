@@ -8,11 +8,12 @@ import numpy as np
 from fastapi import APIRouter, Query, Response
 from pydantic import Field
 
+from app.api.deps import region_tokens
 from app.api.examples import success
 from app.api.metrics import INFERENCE
 from app.api.responses import UNION_PROBLEMS, UnionResponse
 from app.api.unions import UnionDep
-from app.inference.cover import region_token, united
+from app.inference.cover import united
 from app.inference.template import coloured_template
 
 router = APIRouter(tags=["unions"])
@@ -61,9 +62,10 @@ async def localize(
     probabilities expect, grown to hold each operand's own region."""
     models = union.models
     outcome = await union.solved(locate=True)
-    confidence = union_cover = None
+    confidence = token = None
     if outcome.covers is not None:
         union_cover = united(outcome.covers)
+        token = (await region_tokens(union.request)).issue(union_cover, np.asarray(outcome.result.eigenvalues))
         count = len(outcome.covers)
         region, confidence = await anyio.to_thread.run_sync(models.placed_region, union_cover, outcome.placed, count)
     else:
@@ -84,6 +86,6 @@ async def localize(
         part_coverage=region.part_coverage,
         template_vertices=len(models.template.vertices),
         located_by="spectrum" if outcome.covers is None else "correspondence",
-        region_token=None if union_cover is None else region_token(union_cover),
+        region_token=token,
         vertex_confidence=None if confidence is None else np.round(confidence, 3).tolist(),
     )

@@ -182,7 +182,9 @@ async def retrieve(
     """The stored complete shapes nearest to the union of the operands (an open one through its rebuilt body,
     two operands whose overlap is not told by their share profile)."""
     models = union.models
-    outcome = await union.solved(cap_holes=cap_holes, locate=models.body is not None)
+    # An open query is ranked through the body fitted to where its uploads lie; one capped closed
+    # scan is ranked as it is, so it is not placed.
+    outcome = await union.solved(cap_holes=cap_holes, locate=models.body is not None and not cap_holes)
     looked_up, ranked_by, notes = await looked_up_spectra(union.request, models, outcome, rebuild, profile)
     scale = models.body.identity_scale if ranked_by == "fitted_body" and models.body is not None else None
     matches, people, ahead, first = await ranked(store, looked_up, ranked_by, top, scale)

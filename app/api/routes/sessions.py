@@ -15,7 +15,7 @@ import numpy as np
 from fastapi import APIRouter, Body, File, Form, Path, Query, Request, Response, UploadFile
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.api.deps import ModelsDep, SessionsDep, SettingsDep
+from app.api.deps import ModelsDep, SessionsDep, SettingsDep, region_tokens
 from app.api.examples import success
 from app.api.operands import upload_options
 from app.api.problems import (
@@ -30,8 +30,9 @@ from app.api.responses import MODEL_VERSION_FIELD, UnionInterval
 from app.core.config import Settings
 from app.geometry.io import ALLOWED_TYPES, UNIT_TO_METRES, resolve_file_type
 from app.geometry.plausibility import size_warnings
-from app.inference.cover import Cover, region_token
+from app.inference.cover import Cover
 from app.inference.models import SpectralModels
+from app.inference.region_tokens import RegionTokens
 from app.sessions.reading import SessionState, session_state
 from app.sessions.records import SessionFull, SessionMeta, SessionNotFound
 from app.sessions.session import UnionBy, least_covered, session_cover, session_view
@@ -212,10 +213,10 @@ async def _answer(
         state = await session_state(sessions, models, session_id, request.app.state.solver.session_union)
     except SessionNotFound:
         raise not_found(session_id) from None
-    return _shaped(state, models, settings.session_ttl_seconds)
+    return _shaped(state, models, await region_tokens(request), settings.session_ttl_seconds)
 
 
-def _shaped(state: SessionState, models: SpectralModels, ttl_seconds: float) -> SessionResponse:
+def _shaped(state: SessionState, models: SpectralModels, tokens: RegionTokens, ttl_seconds: float) -> SessionResponse:
     meta, views, union = state.meta, state.views, state.union
     cover = session_cover(views) or Cover.of_region(np.zeros(len(models.template.vertices), bool))
     region = models.region_of(cover.region, cover.share)
@@ -237,7 +238,7 @@ def _shaped(state: SessionState, models: SpectralModels, ttl_seconds: float) -> 
                 eigenvalues=view.eigenvalues.tolist(),
                 area=view.located.area,
                 mean_confidence=view.located.confidence,
-                region_token=region_token(view.located.cover),
+                region_token=tokens.issue(view.located.cover, view.eigenvalues),
                 warnings=list(view.warnings),
             )
             for index, view in enumerate(views)
@@ -252,7 +253,7 @@ def _shaped(state: SessionState, models: SpectralModels, ttl_seconds: float) -> 
         area_fraction=region.area_fraction,
         part_coverage=region.part_coverage,
         least_covered=least_covered(region.part_coverage),
-        region_token=region_token(cover),
+        region_token=tokens.issue(cover, estimate.eigenvalues),
         warnings=warnings,
     )
 
