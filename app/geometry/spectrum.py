@@ -17,7 +17,7 @@ import scipy.sparse as sp
 
 from app.geometry.errors import SolverFailure
 from app.geometry.laplacian import Operators
-from app.geometry.pencil import ShiftedPencil, lowest_shift
+from app.geometry.pencil import NoConvergence, ShiftedPencil, lowest_shift
 from app.geometry.slicing import SLICED_ABOVE, InconsistentSlices, sliced_eigenpairs
 
 DEFAULT_K = 20
@@ -28,6 +28,10 @@ MAX_K = 200
 MAX_EIGENVALUE = 1e15
 # Solvers return λ₁ of a closed surface as ±1e-12·λ_k, and ties as tiny inversions.
 ORDER_TOLERANCE = 1e-6
+# ARPACK's implicit restarts for one solve: body parts, whole bodies and camera views (as cut and
+# re-meshed) converge in 3–5; a long thin strip's nearly degenerate spectrum took 320 (63 s of a
+# worker) and is refused after these, a few seconds in, instead of holding a worker.
+MAX_RESTARTS = 20
 
 
 def shift_for(mass: sp.spmatrix) -> float:
@@ -82,8 +86,15 @@ def eigenpairs(
 
 
 def _solved(pencil: ShiftedPencil, k: int, *, vectors: bool) -> tuple[np.ndarray, np.ndarray | None]:
-    """One ARPACK solve for the ``k`` lowest, at the shift below the spectrum."""
-    values, functions = pencil.nearest(pencil.factor(pencil.lowest_shift), k, vectors=vectors)
+    """One ARPACK solve for the ``k`` lowest, at the shift below the spectrum, within MAX_RESTARTS."""
+    factor = pencil.factor(pencil.lowest_shift)
+    try:
+        values, functions = pencil.nearest(factor, k, vectors=vectors, restarts=MAX_RESTARTS)
+    except NoConvergence as exc:
+        raise NoConvergence(
+            f"{exc}; shapes converge within a few restarts, this one not within {MAX_RESTARTS}: its spectrum is "
+            "nearly degenerate (a long thin strip?)"
+        ) from exc
     _require_a_spectrum(values)
     return values, functions
 

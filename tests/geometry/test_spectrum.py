@@ -8,10 +8,10 @@ import scipy.sparse.linalg as sla
 
 from app.geometry.errors import SolverFailure
 from app.geometry.laplacian import mesh_operators
-from app.geometry.pencil import ShiftedPencil
+from app.geometry.pencil import NoConvergence, ShiftedPencil
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
-from app.geometry.spectrum import eigenpairs, eigenvalues, shift_for
+from app.geometry.spectrum import MAX_RESTARTS, eigenpairs, eigenvalues, shift_for
 from app.geometry.topology import boundary_vertex_mask
 from tests.conftest import disk, grid, sphere
 
@@ -212,3 +212,20 @@ def test_a_factor_is_not_moved_onto_another_sparsity(patch):
     other = ShiftedPencil(operators, boundary_vertex_mask(patch.faces, len(patch.vertices)))
     assert other.factor(-1.0, reuse=factor) is not factor
     assert factor.shift == -1.0
+
+
+def test_a_strip_whose_spectrum_is_nearly_degenerate_is_refused_not_solved_for_minutes():
+    """A 50 m × 4 cm strip three vertices wide: its Dirichlet eigenvalues all lie within 0.01 % of
+    (π / 0.04 m)², which ARPACK separates only after hundreds of restarts (a minute of a worker
+    for 60 000 vertices); the solve stops at its restart budget and says why."""
+    n, length, width = 2000, 50.0, 0.02
+    x = np.linspace(0, length, n)
+    vertices = np.concatenate([np.column_stack([x, np.full(n, row * width), np.zeros(n)]) for row in range(3)])
+    start = np.arange(n - 1)
+    faces = []
+    for row in range(2):
+        row_start = row * n + start
+        faces += [np.column_stack([row_start, row_start + 1, row_start + n + 1])]
+        faces += [np.column_stack([row_start, row_start + n + 1, row_start + n])]
+    with pytest.raises(NoConvergence, match=f"not within {MAX_RESTARTS}"):
+        mesh_spectrum(Mesh(vertices, np.concatenate(faces)), SpectrumOptions(k=20))
