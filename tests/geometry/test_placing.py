@@ -1,6 +1,7 @@
 """A mesh above the vertex budget is placed through its collapsed copy: every vertex takes the
 place of a nearby copy vertex, the copy does not depend on the frame or the winding, and a copy
-the checks refuse leaves the part placed itself."""
+the checks refuse leaves the part placed itself. A point cloud above its budget is placed through
+a fixed random share of its points, each point at its nearest kept point's place."""
 
 import numpy as np
 import pytest
@@ -9,8 +10,8 @@ from scipy.spatial.transform import Rotation
 import app.geometry.placing as placing
 from app.geometry.descriptors import Places, mesh_inputs
 from app.geometry.errors import InvalidGeometry
-from app.geometry.laplacian import mesh_operators
-from app.geometry.placing import mesh_part
+from app.geometry.laplacian import mesh_operators, point_cloud_operators
+from app.geometry.placing import cloud_part, mesh_part
 from app.geometry.topology import boundary_vertex_mask
 from tests.conftest import bumpy_patch, sphere
 
@@ -104,3 +105,23 @@ def test_the_service_refuses_a_budget_below_its_floor(most, monkeypatch):
     monkeypatch.setenv("SPECTRAL_UNIONS_PLACED_VERTICES", str(most))
     with pytest.raises(ValidationError):
         Settings()
+
+
+def test_a_cloud_above_the_budget_is_read_through_a_random_share_of_its_points(monkeypatch):
+    """A 2 562-point sphere cloud above a budget of 600: the graph reads 600 of its points (the
+    same ones every time), every point takes the place of the nearest kept point, half the kept
+    points' spacing away on average, and keeps its own area and boundary flags."""
+    monkeypatch.setattr(placing, "PLACED_POINTS", 600)
+    points = sphere(4).vertices
+    operators = point_cloud_operators(points)
+    boundary = points[:, 2] > 0.9  # any flags: carried as they are
+    part = cloud_part(points, boundary, operators)
+    assert part.inputs.vertices == 600 and part.faces is None
+    assert np.array_equal(part.source, cloud_part(points, boundary, operators).source)
+    kept = part.inputs.points
+    spacing = np.sqrt(4 * np.pi / 600)  # a unit sphere's area shared by the kept points
+    gaps = np.linalg.norm(points - kept[part.source], axis=1)
+    assert gaps.mean() < spacing / 2 and gaps.max() < 2.5 * spacing  # a random share leaves some wider gaps
+    np.testing.assert_array_equal(part.boundary, boundary)
+    np.testing.assert_allclose(part.mass, operators.mass.diagonal(), rtol=1e-6)
+    assert cloud_part(points[:500], boundary[:500], point_cloud_operators(points[:500])).source is None
