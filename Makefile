@@ -8,9 +8,11 @@ BIN := $(VENV)/bin
 .PHONY: run test test-train lint bench dataset train decoder correspondence sessions bodies models
 
 $(BIN)/.installed: pyproject.toml
+	@echo "Setting up $(VENV) with the service and its test dependencies (about a minute, once)..."
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install -e '.[dev]'
+	@echo "Set up."
 	touch $@
 
 run: $(BIN)/.installed  ## set up and serve on $(HOST):$(PORT) (default 127.0.0.1:8000)
