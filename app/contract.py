@@ -31,6 +31,7 @@ RECONSTRUCTION_FILE = "reconstruction.onnx"  # optional: served when present (PO
 # without it registered sessions are not served
 SESSIONS_FILE = "sessions.json"
 BODY_FILE = "body.npz"  # optional: the body basis sessions are fitted with (GET /v1/sessions/{id}/body)
+SEED_BODIES_FILE = "seed_bodies.npz"  # optional: the seed people's shape coefficients in that basis, at rest
 # float32 (batch, k) each, 1/m²: a complete body's spectrum and its σ (all 0: a measured spectrum, not a union)
 RECONSTRUCTION_INPUTS = ("spectrum", "sigma")
 RECONSTRUCTION_OUTPUTS = ("vertices",)  # float32 (batch, template vertices, 3): its rest-pose body, metres

@@ -9,7 +9,7 @@ from pydantic import BaseModel, Field
 
 from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.retrieval.store import Match
-from app.sessions.identity import ahead_warning, ranked_people
+from app.sessions.identity import Candidate, ahead_warning, ranked_people
 
 NPZ_MEDIA_TYPE = "application/x-npz"  # numpy's zip of NPY arrays; np.load reads it
 # What the union-based routes can answer: an upload's problems, and the models'.
@@ -85,7 +85,11 @@ class UnionResponse(UnionInterval):
 class PersonAnswer(BaseModel):
     label: str = Field(description="The stored person's identity label.")
     shape_id: str = Field(description="Their stored shape nearest the query (a person is stored in several poses).")
-    distance: float = Field(description="ShapeDNA distance from the spectrum ranked to that shape's.")
+    distance: float = Field(
+        description="Ranked by shape: the Mahalanobis distance of that shape's body (its person's shape coefficients) "
+        "from the fitted body's, under the fit's uncertainty; otherwise the ShapeDNA distance from the spectrum "
+        "ranked to that shape's."
+    )
     confidence: float | None = Field(
         description="Ranked by a fitted body: a softmax of −d²/2τ² over the people ranked, τ calibrated on anny "
         "sessions (how often the first person is the one scanned: the model card's bodies section); null for "
@@ -97,8 +101,11 @@ def answered_people(matches: list[Match], top: int, scale: float | None) -> tupl
     """The ``top`` people of ``matches``, one per label (:func:`app.sessions.identity.ranked_people`),
     with their confidence at ``scale`` (None: the ranking has no calibrated confidence, answered
     null), and the warning when the first is not clearly ahead."""
-    people = [
-        PersonAnswer(**(asdict(person) | ({} if scale is not None else {"confidence": None})))
-        for person in ranked_people(matches, top, scale or 1.0)
-    ]
+    return answered(ranked_people(matches, top, scale or 1.0), calibrated=scale is not None)
+
+
+def answered(candidates: list[Candidate], calibrated: bool) -> tuple[list[PersonAnswer], list[str]]:
+    """Ranked people as answered (their confidence null where it was not ``calibrated``), and the
+    warning when the first is not clearly ahead."""
+    people = [PersonAnswer(**(asdict(person) | ({} if calibrated else {"confidence": None}))) for person in candidates]
     return people, ahead_warning(people[0].confidence if people else None)

@@ -48,8 +48,11 @@ class BodyBasis:
     motion (rows sum to 1); and what the calibration found (1 before it): per band of view counts
     (``bands``: each band's most views, the last holding any more), the factors on the
     posterior's vertex σ and on the spread of measurements over posterior bodies (short sessions
-    err more than their posterior says, long ones less), and the distance scale τ of an
-    identity's confidence (:mod:`app.sessions.identity`)."""
+    err more than their posterior says, long ones less), the distance scales τ of an
+    identity's confidence, ranked by spectrum and by shape (:mod:`app.sessions.identity`), the
+    shape distance past which a person scanned is taken for one not stored, and how far (σ per
+    whitened coefficient) a whole body fitted in a pose of its own lies from its shape at rest (a
+    stored scan's body, :mod:`app.api.routes.shapes`)."""
 
     mean: np.ndarray
     components: np.ndarray
@@ -58,6 +61,9 @@ class BodyBasis:
     sigma_scale: tuple[float, ...] = (1.0,)
     spread_scale: tuple[float, ...] = (1.0,)
     identity_scale: float = 1.0
+    shape_identity_scale: float = 1.0
+    posed_spread: float = 1.0
+    unknown_distance: float = float("inf")
 
     @classmethod
     def load(cls, path: Path) -> "BodyBasis":
@@ -71,6 +77,9 @@ class BodyBasis:
             tuple(float(scale) for scale in data["sigma_scale"]),
             tuple(float(scale) for scale in data["spread_scale"]),
             float(data["identity_scale"]),
+            float(data["shape_identity_scale"]),
+            float(data["posed_spread"]),
+            float(data["unknown_distance"]),
         )
 
     def save(self, path: Path) -> None:
@@ -83,6 +92,9 @@ class BodyBasis:
             sigma_scale=np.asarray(self.sigma_scale),
             spread_scale=np.asarray(self.spread_scale),
             identity_scale=self.identity_scale,
+            shape_identity_scale=self.shape_identity_scale,
+            posed_spread=self.posed_spread,
+            unknown_distance=self.unknown_distance,
         )
 
     def scales(self, views: int) -> tuple[float, float]:

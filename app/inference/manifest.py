@@ -11,12 +11,19 @@ import hashlib
 import json
 from pathlib import Path
 
-from app.contract import BODY_FILE, CORRESPONDENCE_FILE, RECONSTRUCTION_FILE, SESSIONS_FILE, spectrum_definition
+from app.contract import (
+    BODY_FILE,
+    CORRESPONDENCE_FILE,
+    RECONSTRUCTION_FILE,
+    SEED_BODIES_FILE,
+    SESSIONS_FILE,
+    spectrum_definition,
+)
 
 MANIFEST_FILE = "MANIFEST.json"
 ARTEFACTS = ("union.onnx", "localizer.onnx", "template.npz", "template.json")
 # Served when present; recorded and checked like the others when they are.
-OPTIONAL_ARTEFACTS = (RECONSTRUCTION_FILE, CORRESPONDENCE_FILE, SESSIONS_FILE, BODY_FILE)
+OPTIONAL_ARTEFACTS = (RECONSTRUCTION_FILE, CORRESPONDENCE_FILE, SESSIONS_FILE, BODY_FILE, SEED_BODIES_FILE)
 
 
 class ModelsCorrupt(ValueError):

@@ -23,7 +23,18 @@ import numpy as np
 import psycopg
 
 from app.retrieval.feature_copy import FeatureCopy
-from app.retrieval.store import DeletionLog, Match, ShapeRecord, StoreUnavailable, matches
+from app.retrieval.store import (
+    BODIES_QUERY,
+    BODIES_TABLE,
+    BODY_COLUMNS,
+    DeletionLog,
+    Match,
+    ShapeRecord,
+    StoredBodies,
+    StoredBody,
+    StoreUnavailable,
+    matches,
+)
 
 SCHEMA_LOCK = 7436  # replicas starting together change the schema one at a time
 INSERT_LOCK = 7437  # every insert and deletion, so that rows and deletions become visible in order
@@ -55,6 +66,7 @@ SCHEMA = (
         INSERT INTO deleted_shapes (key) VALUES (OLD.seq); RETURN NULL; END $$""",
     """CREATE OR REPLACE TRIGGER shapes_deletion_logged AFTER DELETE ON shapes
         FOR EACH ROW EXECUTE FUNCTION log_shape_deletion()""",
+    BODIES_TABLE.format(blob="BYTEA", real="DOUBLE PRECISION"),
 )
 COLUMNS = "id, label, source, spectrum, created_at"
 CONNECT_TIMEOUT_SECONDS = 5
@@ -149,7 +161,7 @@ class PostgresStore:
         with self._connect() as connection:
             connection.execute("SELECT 1")
 
-    def add(self, label: str, spectrum: np.ndarray, source: str) -> ShapeRecord:
+    def add(self, label: str, spectrum: np.ndarray, source: str, body: StoredBody | None = None) -> ShapeRecord:
         record = ShapeRecord(
             uuid.uuid4().hex,
             label,
@@ -163,9 +175,14 @@ class PostgresStore:
                 f"INSERT INTO shapes ({COLUMNS}) VALUES (%s, %s, %s, %s, %s)",
                 (record.id, label, source, record.spectrum, record.created_at),
             )
+            if body is not None:
+                row = (record.id, label, _bytes(body.coefficients), body.spread)
+                connection.execute(f"INSERT INTO shape_bodies ({BODY_COLUMNS}) VALUES (%s, %s, %s, %s)", row)
         return record
 
-    def add_many(self, labels: list[str], spectra: np.ndarray, source: str) -> int:
+    def add_many(
+        self, labels: list[str], spectra: np.ndarray, source: str, bodies: list[StoredBody] | None = None
+    ) -> int:
         now = datetime.now(UTC).isoformat(timespec="seconds")
         rows = [
             (uuid.uuid4().hex, label, source, [float(x) for x in s], now)
@@ -174,7 +191,15 @@ class PostgresStore:
         with self._connect() as connection, connection.cursor() as cursor:
             cursor.execute("SELECT pg_advisory_xact_lock(%s)", (INSERT_LOCK,))
             cursor.executemany(f"INSERT INTO shapes ({COLUMNS}) VALUES (%s, %s, %s, %s, %s)", rows)
+            if bodies is not None:
+                stored = [(r[0], r[1], _bytes(b.coefficients), b.spread) for r, b in zip(rows, bodies, strict=True)]
+                cursor.executemany(f"INSERT INTO shape_bodies ({BODY_COLUMNS}) VALUES (%s, %s, %s, %s)", stored)
         return len(rows)
+
+    def bodies(self) -> StoredBodies:
+        with self._snapshot() as connection:
+            rows = connection.execute(BODIES_QUERY).fetchall()
+        return StoredBodies.of_rows(rows)
 
     def count(self) -> int:
         with self._connect() as connection:
@@ -190,6 +215,7 @@ class PostgresStore:
     def delete(self, shape_id: str) -> bool:
         with self._connect() as connection:
             deleted = connection.execute("DELETE FROM shapes WHERE id = %s", (shape_id,)).rowcount > 0
+            connection.execute("DELETE FROM shape_bodies WHERE id = %s", (shape_id,))
             if deleted:
                 _PostgresRows(connection).prune()  # under the lock the deletion's trigger took
         return deleted
@@ -243,3 +269,7 @@ def _float8_arrays(arrays: list[bytes]) -> np.ndarray:
 
 _HEADER_BYTES = 20
 _FLOAT8_ELEMENT = np.dtype([("length", ">i4"), ("value", ">f8")])
+
+
+def _bytes(values: np.ndarray) -> bytes:
+    return np.asarray(values, dtype=np.float64).tobytes()

@@ -21,6 +21,18 @@ import numpy as np
 from app.retrieval.distance import Ranked
 from app.retrieval.feature_copy import DELETIONS_KEPT, FeatureCopy
 
+# A stored shape's body: its shape coefficients in the served body basis (:mod:`app.inference.
+# bodyfit`), what identity ranks people by; a shape stored without one is ranked by spectrum only.
+BODIES_TABLE = """CREATE TABLE IF NOT EXISTS shape_bodies (
+        id TEXT PRIMARY KEY,
+        label TEXT NOT NULL,
+        coefficients {blob} NOT NULL,
+        spread {real} NOT NULL
+    )"""
+BODY_COLUMNS = "id, label, coefficients, spread"
+BODIES_QUERY = (  # a body whose shape is gone is not read, whatever deleted the shape
+    "SELECT b.id, b.label, b.coefficients, b.spread FROM shape_bodies b JOIN shapes s ON s.id = b.id ORDER BY b.id"
+)
 SCHEMA = (
     """CREATE TABLE IF NOT EXISTS shapes (
         id TEXT PRIMARY KEY,
@@ -44,6 +56,7 @@ SCHEMA = (
     "CREATE TABLE IF NOT EXISTS deleted_shapes (position INTEGER PRIMARY KEY, key INTEGER NOT NULL)",
     """CREATE TRIGGER IF NOT EXISTS shapes_deletion_logged AFTER DELETE ON shapes
         BEGIN INSERT INTO deleted_shapes (key) VALUES (OLD.rowid); END""",
+    BODIES_TABLE.format(blob="BLOB", real="REAL"),
 )
 COLUMNS = "id, label, source, spectrum, created_at"
 
@@ -62,6 +75,35 @@ class ShapeRecord:
 
 
 @dataclass(frozen=True)
+class StoredBody:
+    """A stored shape's body: its person's shape ``coefficients`` (C,) at rest, and their
+    ``spread`` (whitened units): how far they may be from the person's own (read at rest: ~0;
+    fitted to a posed scan: pose leaks into shape)."""
+
+    coefficients: np.ndarray
+    spread: float
+
+
+@dataclass(frozen=True)
+class StoredBodies:
+    """The stored shapes that have a body: their ids, labels, coefficients (n, C) and spreads (n,)."""
+
+    ids: list[str]
+    labels: list[str]
+    coefficients: np.ndarray
+    spread: np.ndarray
+
+    @classmethod
+    def of_rows(cls, rows: list[tuple]) -> "StoredBodies":
+        """From (id, label, coefficients as float64 bytes, spread) rows."""
+        if not rows:
+            return cls([], [], np.zeros((0, 0)), np.zeros(0))
+        ids, labels, blobs, spreads = zip(*rows, strict=True)
+        coefficients = np.stack([np.frombuffer(bytes(blob), dtype=np.float64) for blob in blobs])
+        return cls(list(ids), list(labels), coefficients, np.asarray(spreads, dtype=np.float64))
+
+
+@dataclass(frozen=True)
 class Match:
     record: ShapeRecord
     distance: float
@@ -73,8 +115,14 @@ class ShapeStore(Protocol):
 
     backend: str
 
-    def add(self, label: str, spectrum: np.ndarray, source: str) -> ShapeRecord: ...
-    def add_many(self, labels: list[str], spectra: np.ndarray, source: str) -> int: ...
+    def add(self, label: str, spectrum: np.ndarray, source: str, body: StoredBody | None = None) -> ShapeRecord: ...
+    def add_many(
+        self, labels: list[str], spectra: np.ndarray, source: str, bodies: list[StoredBody] | None = None
+    ) -> int: ...
+    def bodies(self) -> StoredBodies:
+        """Every stored shape's body (the shapes stored with one)."""
+        ...
+
     def count(self) -> int: ...
     def page(self, offset: int, limit: int) -> list[ShapeRecord]: ...
     def delete(self, shape_id: str) -> bool: ...
@@ -128,7 +176,7 @@ class SQLiteStore:
     def close(self) -> None:
         """Nothing held open: every operation has its own short-lived connection."""
 
-    def add(self, label: str, spectrum: np.ndarray, source: str) -> ShapeRecord:
+    def add(self, label: str, spectrum: np.ndarray, source: str, body: StoredBody | None = None) -> ShapeRecord:
         record = ShapeRecord(
             id=uuid.uuid4().hex,
             label=label,
@@ -141,9 +189,14 @@ class SQLiteStore:
                 "INSERT INTO shapes (id, label, source, spectrum, created_at) VALUES (?, ?, ?, ?, ?)",
                 (record.id, label, source, _blob(spectrum), record.created_at),
             )
+            if body is not None:
+                row = (record.id, label, _blob(body.coefficients), body.spread)
+                connection.execute(f"INSERT INTO shape_bodies ({BODY_COLUMNS}) VALUES (?, ?, ?, ?)", row)
         return record
 
-    def add_many(self, labels: list[str], spectra: np.ndarray, source: str) -> int:
+    def add_many(
+        self, labels: list[str], spectra: np.ndarray, source: str, bodies: list[StoredBody] | None = None
+    ) -> int:
         """Insert a batch in one transaction (the seed database)."""
         now = datetime.now(UTC).isoformat(timespec="seconds")
         rows = [(uuid.uuid4().hex, label, source, _blob(s), now) for label, s in zip(labels, spectra, strict=True)]
@@ -151,7 +204,15 @@ class SQLiteStore:
             connection.executemany(
                 "INSERT INTO shapes (id, label, source, spectrum, created_at) VALUES (?, ?, ?, ?, ?)", rows
             )
+            if bodies is not None:
+                stored = [(r[0], r[1], _blob(b.coefficients), b.spread) for r, b in zip(rows, bodies, strict=True)]
+                connection.executemany(f"INSERT INTO shape_bodies ({BODY_COLUMNS}) VALUES (?, ?, ?, ?)", stored)
         return len(rows)
+
+    def bodies(self) -> StoredBodies:
+        with self._connect() as connection:
+            rows = connection.execute(BODIES_QUERY).fetchall()
+        return StoredBodies.of_rows(rows)
 
     def count(self) -> int:
         with self._connect() as connection:
@@ -168,6 +229,7 @@ class SQLiteStore:
     def delete(self, shape_id: str) -> bool:
         with self._connect() as connection:
             deleted = connection.execute("DELETE FROM shapes WHERE id = ?", (shape_id,)).rowcount > 0
+            connection.execute("DELETE FROM shape_bodies WHERE id = ?", (shape_id,))
             if deleted:
                 DeletionLog(connection).prune()
         return deleted

@@ -14,8 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.contract import INTERVAL_Z
-from app.inference.bodyfit import BodyBasis, FittedBody, fit_body
+from app.inference.bodyfit import BodyBasis, FittedBody, NotEnoughSeen, fit_body
 from app.inference.measurements import MEASUREMENTS, Measurer, supported
+from app.retrieval.store import StoredBody
 from app.sessions.aligned import aligned_views
 from app.sessions.fused import View
 from app.sessions.session import SessionView
@@ -85,6 +86,17 @@ def fitted_views(
             f"at the median (at most {1000 * MAX_RESIDUAL_M:.0f})"
         )
     return fitted
+
+
+def stored_body(basis: BodyBasis, template: np.ndarray, geometry: View, places: np.ndarray) -> StoredBody | None:
+    """The body a stored whole-body scan keeps for identity: the shape fitted to it (in the pose it
+    was scanned in, which leaks into the shape: ``basis.posed_spread``), or None where no body
+    fits it (not a person, too little of one)."""
+    try:
+        fitted = fitted_views(basis, template, [geometry], [places], registered=True)
+    except (NotEnoughSeen, NoBodyFits):
+        return None
+    return StoredBody(fitted.coefficients, basis.posed_spread)
 
 
 def fitted_session(basis: BodyBasis, template: np.ndarray, views: list[SessionView], registered: bool) -> FittedBody:

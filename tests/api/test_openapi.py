@@ -99,7 +99,7 @@ def test_every_json_answer_has_a_success_example_that_its_model_accepts():
     from app.api.routes.overlap import OverlapResponse
     from app.api.routes.reconstruct import ReconstructResponse
     from app.api.routes.retrieve import RetrieveResponse
-    from app.api.routes.shapes import ShapeOut, ShapePage
+    from app.api.routes.shapes import AddedShape, ShapePage
     from app.geometry.pipeline import SpectrumReport
 
     models = {
@@ -110,7 +110,7 @@ def test_every_json_answer_has_a_success_example_that_its_model_accepts():
         ("post", "/v1/localize", "200"): LocalizeResponse,
         ("post", "/v1/reconstruct", "200"): ReconstructResponse,
         ("post", "/v1/retrieve", "200"): RetrieveResponse,
-        ("post", "/v1/shapes", "201"): ShapeOut,
+        ("post", "/v1/shapes", "201"): AddedShape,
         ("get", "/v1/shapes", "200"): ShapePage,
         ("get", "/v1/models", "200"): ModelsResponse,
     }

@@ -263,7 +263,9 @@ def test_a_registered_session_shows_the_union_the_service_s_session_solves(base,
     assert listed and "shoulder breadth" in browser.find_element(By.ID, "measurements-note").text
     # Who it is: the stored people nearest the fitted body, as the session's identity answers them.
     identity = httpx.get(f"{base}/v1/sessions/{session['id']}/identity", params={"top": 5}, timeout=60).json()
-    assert browser.find_element(By.ID, "matches-note").get_attribute("data-ranked-by") == "fitted_body"
+    assert (
+        browser.find_element(By.ID, "matches-note").get_attribute("data-ranked-by") == identity["ranked_by"] == "shape"
+    )
     people = [item.text.split(" (")[0] for item in browser.find_elements(By.CSS_SELECTOR, "#matches li")]
     assert people == [person["label"] for person in identity["people"]]
 

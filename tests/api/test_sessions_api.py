@@ -11,7 +11,7 @@ import trimesh
 from fastapi.testclient import TestClient
 from scipy.spatial.transform import Rotation
 
-from app.contract import BODY_FILE, SESSIONS_FILE
+from app.contract import BODY_FILE, SEED_BODIES_FILE, SESSIONS_FILE
 from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.inference.template import PART_NAMES, Template
@@ -251,12 +251,23 @@ def test_scans_cut_from_a_stored_body_find_that_body_first(client, template, sca
     answer = client.get(f"/v1/sessions/{session}/identity", params={"top": 5})
     assert answer.status_code == 200, answer.text
     found = answer.json()
-    assert found["ranked_by"] == "fitted_body" and found["views"] == 3
+    assert found["ranked_by"] == "shape" and found["views"] == 3 and found["looked_up"] is None
     people = found["people"]
     assert people[0]["label"] == "scanned-person" and people[0]["shape_id"] == stored.json()["id"]
     assert len({p["label"] for p in people}) == len(people) == 5  # one answer per person
     confidences = [p["confidence"] for p in people]
     assert confidences == sorted(confidences, reverse=True) and sum(confidences) <= 1 + 1e-9
+
+
+def test_a_store_without_bodies_is_ranked_by_the_fitted_body_s_spectrum(tmp_path, scans):
+    """Seeded without the seed people's bodies, no stored shape has one: identity ranks the stored
+    spectra by the fitted body's closed spectrum instead, and says so."""
+    with TestClient(create_app(settings_without(tmp_path, SEED_BODIES_FILE))) as bare:
+        session = new_session(bare, registered=True)["id"]
+        for name in SESSION_SCANS:
+            assert add(bare, session, name, scans[name]).status_code == 201
+        found = bare.get(f"/v1/sessions/{session}/identity", params={"top": 3}).json()
+    assert found["ranked_by"] == "fitted_body" and len(found["looked_up"]) == 20 and len(found["people"]) == 3
 
 
 def test_a_ball_is_no_body(client):

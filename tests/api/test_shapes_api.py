@@ -56,6 +56,19 @@ def test_a_closed_body_is_stored_with_its_plain_spectrum(stored):
     assert len(spectrum) == 20 and abs(spectrum[0]) < 1e-6 and spectrum[1] > 0
 
 
+def test_a_body_is_stored_with_its_body_and_a_ball_without(empty_client, stored):
+    """A person's scan keeps the body fitted to it (what identity ranks by); a 10 cm ball, which no
+    body passes through, is stored by its spectrum alone."""
+    client, _ = empty_client
+    assert stored["medium"]["body_fitted"] is True
+    ball = trimesh.creation.icosphere(subdivisions=4, radius=0.1).export(file_type="ply")
+    answer = client.post(
+        "/v1/shapes", data={"label": "ball"}, files={"file": ("ball.ply", ball)}, headers={"X-API-Key": API_KEY}
+    )
+    assert answer.status_code == 201 and answer.json()["body_fitted"] is False
+    assert client.delete(f"/v1/shapes/{answer.json()['id']}", headers={"X-API-Key": API_KEY}).status_code == 204
+
+
 def test_scaling_a_body_scales_its_stored_spectrum(stored):
     ratio = np.array(stored["small"]["spectrum"][1:]) / np.array(stored["medium"]["spectrum"][1:])
     np.testing.assert_allclose(ratio, 1 / 0.9**2, rtol=1e-6)

@@ -3,8 +3,10 @@
 import numpy as np
 import pytest
 
+from app.contract import SEED_BODIES_FILE
 from app.retrieval.distance import distances
-from app.retrieval.seed import open_store
+from app.retrieval.seed import AT_REST_SPREAD, open_store
+from app.retrieval.store import StoredBody
 
 
 def spectra(count: int, seed: int) -> np.ndarray:
@@ -65,6 +67,33 @@ def test_seed_fills_only_an_empty_store(tmp_path, request):
     assert first.count() == 4
     again = open_store(tmp_path / "s.sqlite", None, tmp_path)
     assert again.count() == 4
+
+
+def test_a_shape_stored_with_a_body_gives_it_back_until_deleted(store):
+    """Bodies come back as stored, with their labels and spreads; a shape without one has none;
+    deleting a shape deletes its body."""
+    coefficients = np.arange(24, dtype=np.float64) / 7
+    with_body = store.add("ann", spectra(1, 3)[0], "ann.ply", StoredBody(coefficients, 0.4))
+    store.add("bob", spectra(1, 4)[0], "bob.ply")
+    store.add_many(
+        ["cy", "dee"], spectra(2, 5), "seed", [StoredBody(-coefficients, 0.1), StoredBody(coefficients, 0.1)]
+    )
+    bodies = store.bodies()
+    assert sorted(bodies.labels) == ["ann", "cy", "dee"] and with_body.id in bodies.ids
+    ann = bodies.ids.index(with_body.id)
+    np.testing.assert_array_equal(bodies.coefficients[ann], coefficients)
+    assert bodies.spread[ann] == 0.4 and sorted(bodies.spread.tolist()) == [0.1, 0.1, 0.4]
+    assert store.delete(with_body.id)
+    assert sorted(store.bodies().labels) == ["cy", "dee"]
+
+
+def test_the_seed_stores_each_person_s_body_at_rest(tmp_path):
+    np.savez(tmp_path / "shapes.npz", labels=np.array(["a", "b", "a"]), spectra=spectra(3, 6))
+    np.savez(tmp_path / SEED_BODIES_FILE, labels=np.array(["b", "a"]), coefficients=np.array([[1.0, 2.0], [3.0, 4.0]]))
+    bodies = open_store(tmp_path / "s.sqlite", None, tmp_path).bodies()
+    rows = sorted(zip(bodies.labels, bodies.coefficients.tolist(), strict=True))
+    assert rows == [("a", [3.0, 4.0]), ("a", [3.0, 4.0]), ("b", [1.0, 2.0])]
+    assert set(bodies.spread.tolist()) == {AT_REST_SPREAD}
 
 
 def test_postgres_reuses_connections_across_a_server_restart(tmp_path):

@@ -1,11 +1,22 @@
-"""One answer per person, nearest first, with a softmax confidence checked by hand."""
+"""One answer per person, nearest first, with a softmax confidence checked by hand; by shape, the
+Mahalanobis distance under the fit's uncertainty, checked by hand."""
 
 import math
 
+import numpy as np
 import pytest
 
-from app.retrieval.store import Match, ShapeRecord
-from app.sessions.identity import CLEARLY_AHEAD, ahead_warning, ranked_people
+from app.inference.bodyfit import FittedBody
+from app.retrieval.store import Match, ShapeRecord, StoredBodies
+from app.sessions.identity import (
+    CLEARLY_AHEAD,
+    ahead_warning,
+    ranked_by_shape,
+    ranked_people,
+    ranked_rows,
+    shape_distances,
+    unknown_warning,
+)
 
 
 def match(label: str, shape: str, distance: float) -> Match:
@@ -30,3 +41,31 @@ def test_a_first_person_not_clearly_ahead_is_warned_about():
     clear = ranked_people([match("ann", "a", 0.0), match("bob", "b", 5.0)], top=2, scale=1.0)
     assert clear[0].confidence > CLEARLY_AHEAD and not ahead_warning(clear[0].confidence)
     assert ranked_people([], top=3, scale=1.0) == [] and not ahead_warning(None)
+
+
+def test_by_shape_what_the_views_left_uncertain_counts_less():
+    """Hand-checked Mahalanobis distances: a stored body 2 away along a coefficient the fit knows
+    to ±2 is at 1; one 0.5 away along a coefficient known to ±0.1 is at 5, so it ranks second
+    though nearer; a stored body's spread widens its own distance: 2 / √(4 + 1.5²) = 0.8."""
+    fitted = FittedBody(np.array([1.0, -1.0]), np.diag([4.0, 0.01]), points=1000, residual_m=0.005)
+    bodies = StoredBodies(
+        ["a", "b", "c"],
+        ["ann", "bob", "cy"],
+        np.array([[3.0, -1.0], [1.0, -0.5], [3.0, -1.0]]),
+        np.array([0.0, 0.0, 1.5]),
+    )
+    np.testing.assert_allclose(shape_distances(fitted, bodies), [1.0, 5.0, 0.8], rtol=1e-9)
+    people = ranked_by_shape(fitted, bodies, top=3, scale=1.0, unknown=float("inf"))
+    assert [p.label for p in people] == ["cy", "ann", "bob"] and [p.shape_id for p in people] == ["c", "a", "b"]
+    assert sum(p.confidence for p in people) == pytest.approx(1.0)
+
+
+def test_someone_not_stored_takes_a_share_of_the_confidence_and_is_named_when_nearest():
+    """With "not stored" at distance 1: people at 0 and 1 get e⁰ and e^-½ against e^-½ more; a
+    session whose nearest stored person is at 3 is said to be probably of someone not stored."""
+    people = ranked_rows([("ann", "a", 0.0), ("bob", "b", 1.0)], top=2, scale=1.0, unknown=1.0)
+    total = 1 + 2 * math.exp(-0.5)
+    assert [p.confidence for p in people] == pytest.approx([1 / total, math.exp(-0.5) / total])
+    far = ranked_rows([("ann", "a", 3.0)], top=1, scale=1.0, unknown=1.0)
+    assert far[0].confidence == pytest.approx(math.exp(-4.5) / (math.exp(-4.5) + math.exp(-0.5)))
+    assert "probably not stored" in unknown_warning(far[0], 1.0)[0] and not unknown_warning(people[0], 1.0)

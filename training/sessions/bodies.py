@@ -18,22 +18,29 @@ from pathlib import Path
 import numpy as np
 
 from app.contract import BODY_FILE, INTERVAL_Z, RECONSTRUCTION_FILE
+from app.geometry.shapes import Mesh
 from app.inference.bodyfit import BodyBasis
 from app.inference.manifest import write_manifest
 from app.inference.measurements import MEASUREMENTS, Measurer
 from app.inference.models import SpectralModels
-from app.sessions.body import NoBodyFits, SessionBody, session_body
-from app.sessions.fused import fused_spectrum
-from app.sessions.identity import SHAPES_PER_PERSON, ranked_people
+from app.sessions.body import NoBodyFits, SessionBody, session_body, stored_body
+from app.sessions.fused import fused_spectrum, view_of_part
+from app.sessions.identity import Candidate, ranked_rows, unknown_warning
 from app.sessions.session import SessionView, session_coverage, session_union
 from training.glance import CARD, update_glance
 from training.learning.card import replace_block
 from training.reconstruction.evaluate import closed_spectrum, rigidly_aligned
 from training.reconstruction.export import decoder_basis
 from training.sessions.body_card import BEGIN, END, render
-from training.sessions.identities import Gallery, fitted_scale, rank_of
+from training.sessions.identities import (
+    Gallery,
+    fitted_scale,
+    rank_of,
+    rest_coefficients,
+    write_seed_bodies,
+)
 from training.sessions.reading import moved, session_views
-from training.sessions.scans import VARIANTS, Person, people, test_c_people
+from training.sessions.scans import VARIANTS, Person, people, solved_view, test_c_people
 
 LENGTHS = (3, 5, 12, 24)
 ANSWERED = 5  # people an identity answers (its top)
@@ -128,14 +135,11 @@ def _sessions(
 
 
 def _ranked(body: SessionBody, person: Person, served: SpectralModels, gallery: Gallery) -> dict:
-    """The fitted body's spectrum against the gallery: every person's distance and the stored
-    shapes the service would rank its answer from."""
+    """The fitted body against the gallery: every person's distance by shape (as served) and by
+    the fitted body's closed spectrum (as served before)."""
     spectrum = closed_spectrum(body.vertices, served.template.faces, served.k)
-    return {
-        "label": person.label,
-        "distances": gallery.person_distances(spectrum),
-        "matches": gallery.matches(spectrum, ANSWERED * SHAPES_PER_PERSON),
-    }
+    shape, by_spectrum = gallery.shape_distances(body.fitted), gallery.person_distances(spectrum)
+    return {"label": person.label, "shape": shape, "distances": by_spectrum}
 
 
 def _decoded_union(served: SpectralModels, views: list[SessionView]) -> np.ndarray:
@@ -147,6 +151,19 @@ def _decoded_union(served: SpectralModels, views: list[SessionView]) -> np.ndarr
     return closed_spectrum(decoded, served.template.faces, served.k)
 
 
+def _posed_spread(served: SpectralModels, basis: BodyBasis, found: list[Person]) -> float:
+    """σ per whitened coefficient of a whole posed body's fit (solved, placed and fitted as
+    ``POST /v1/shapes`` stores a scan's body) around the person's shape at rest."""
+    deviations = []
+    for person in found:
+        solved = solved_view(Mesh(person.body, served.template.faces))
+        placed = served.correspondence.placed(solved.part)
+        stored = stored_body(basis, served.template.vertices, view_of_part(solved.part), placed.placement.position)
+        if stored is not None:
+            deviations.append(stored.coefficients - rest_coefficients(basis, person.rest))
+    return float(np.sqrt(np.mean(np.square(deviations))))
+
+
 def _scales(rows: list[dict]) -> tuple[float, float]:
     """The factors that make 90 % of ``rows``' vertex errors and measurement errors fall inside Z σ."""
     vertex = np.concatenate([row["vertex_ratio"] for row in rows])
@@ -155,25 +172,39 @@ def _scales(rows: list[dict]) -> tuple[float, float]:
     return float(np.quantile(vertex, 0.9) / INTERVAL_Z), float(np.quantile(spread, 0.9) / INTERVAL_Z)
 
 
-def _identity(rows: list[dict], scale: float) -> dict:
-    """How often the person scanned is answered first and among the first ANSWERED, the first's
-    mean confidence as served, and the same first-place rate for the union decoded (the service's
-    ranking before, registered sessions) and for the true body at rest (the ceiling)."""
-    answers = [ranked_people(row["matches"], ANSWERED, scale) for row in rows]
+def _identity(rows: list[dict], shape_scale: float, unknown: float) -> dict:
+    """How often the person scanned is answered first and among the first ANSWERED by shape, the
+    first's mean confidence as served, how often the answer says the person is probably not
+    stored when they are, and when they are not (their own shapes taken out of the gallery); the
+    same first-place rate for the fitted body's closed spectrum and the union decoded (the
+    service's rankings before; decoded: registered sessions) and for the true body's spectrum at
+    rest (a spectrum's ceiling)."""
+    answers = [_by_shape(row["shape"], shape_scale, unknown) for row in rows]
+    strangers = [
+        _by_shape({k: d for k, d in row["shape"].items() if k != row["label"]}, shape_scale, unknown) for row in rows
+    ]
     today = [rank_of(row["today"], row["label"]) == 0 for row in rows if "today" in row]
     return {
         "top1": float(np.mean([a[0].label == row["label"] for a, row in zip(answers, rows, strict=True)])),
         "top5": float(np.mean([row["label"] in {c.label for c in a} for a, row in zip(answers, rows, strict=True)])),
         "confidence": float(np.mean([a[0].confidence for a in answers])),
+        "stored_warned": float(np.mean([bool(unknown_warning(a[0], unknown)) for a in answers])),
+        "not_stored_warned": float(np.mean([bool(unknown_warning(a[0], unknown)) for a in strangers])),
+        "spectrum_top1": float(np.mean([rank_of(row["distances"], row["label"]) == 0 for row in rows])),
         "today_top1": float(np.mean(today)) if today else None,
         "ceiling_top1": float(np.mean([rank_of(row["ceiling"], row["label"]) == 0 for row in rows])),
     }
 
 
-def summary(rows: list[dict], scale: float) -> dict:
+def _by_shape(person_distances: dict[str, float], scale: float, unknown: float) -> list[Candidate]:
+    """The people answered from each person's shape distance, as the route answers them."""
+    return ranked_rows([(label, label, d) for label, d in person_distances.items()], ANSWERED, scale, unknown)
+
+
+def summary(rows: list[dict], shape_scale: float, unknown: float) -> dict:
     """Per reading (views / registered): vertex error, the mean body's, interval coverage, per
     measurement the mean absolute error (mm), the mean body's, coverage and how often measured,
-    and identity (:func:`_identity`, confidences at ``scale``)."""
+    and identity (:func:`_identity`, confidences at ``shape_scale``)."""
     out = {}
     for key in sorted({(row["views"], row["registered"]) for row in rows}):
         tried = [row for row in rows if (row["views"], row["registered"]) == key]
@@ -198,7 +229,7 @@ def summary(rows: list[dict], scale: float) -> dict:
             "mean_body_mm": float(np.mean([row["mean_body_mm"] for row in chosen])),
             "vertex_held": float(np.mean(ratios <= INTERVAL_Z)),
             "measurements": per,
-            "identity": _identity(chosen, scale),
+            "identity": _identity(chosen, shape_scale, unknown),
         }
     return out
 
@@ -210,12 +241,14 @@ def fit_bodies(models: Path, count: int, seed: int, test_c: int, command: str) -
     ``models/bodies.json``, the manifest and the card's bodies section; return the metrics."""
     basis = body_basis(models)
     basis.save(models / BODY_FILE)
+    write_seed_bodies(models, basis)
     write_manifest(models)
     served = SpectralModels(models)
     faces, seed_gallery = served.template.faces, Gallery.seed(models)
     _, calibration_people = people(count, seed)
     stored = np.array([closed_spectrum(person.rest, faces, served.k) for person in calibration_people])
-    gallery = seed_gallery.with_people([person.label for person in calibration_people], stored)
+    at_rest = np.array([rest_coefficients(basis, person.rest) for person in calibration_people])
+    gallery = seed_gallery.with_people([person.label for person in calibration_people], stored, at_rest)
     rows = [row for row in _sessions(served, basis, calibration_people, VARIANTS, gallery) if row["fitted"]]
     lower = (0, *BANDS[:-1])
     scales = [
@@ -223,8 +256,18 @@ def fit_bodies(models: Path, count: int, seed: int, test_c: int, command: str) -
     ]
     sigma_scale, spread_scale = tuple(s[0] for s in scales), tuple(s[1] for s in scales)
     identity_scale = fitted_scale([(row["distances"], row["label"]) for row in rows])
+    shape_scale = fitted_scale([(row["shape"], row["label"]) for row in rows])
+    unknown = max(row["shape"][row["label"]] for row in rows)  # no calibration person's own shape was farther
+    posed_spread = _posed_spread(served, basis, calibration_people)
     basis = replace(
-        basis, bands=BANDS, sigma_scale=sigma_scale, spread_scale=spread_scale, identity_scale=identity_scale
+        basis,
+        bands=BANDS,
+        sigma_scale=sigma_scale,
+        spread_scale=spread_scale,
+        identity_scale=identity_scale,
+        shape_identity_scale=shape_scale,
+        posed_spread=posed_spread,
+        unknown_distance=unknown,
     )
     basis.save(models / BODY_FILE)
     write_manifest(models)
@@ -238,8 +281,11 @@ def fit_bodies(models: Path, count: int, seed: int, test_c: int, command: str) -
         "sigma_scale": list(sigma_scale),
         "spread_scale": list(spread_scale),
         "identity_scale": identity_scale,
-        "calibration": summary([row | {"fitted": True} for row in rows], identity_scale),
-        "evaluation": summary(_sessions(served, served.body, found, VARIANTS, seed_gallery), identity_scale),
+        "shape_identity_scale": shape_scale,
+        "posed_spread": posed_spread,
+        "unknown_distance": unknown,
+        "calibration": summary([row | {"fitted": True} for row in rows], shape_scale, unknown),
+        "evaluation": summary(_sessions(served, served.body, found, VARIANTS, seed_gallery), shape_scale, unknown),
         "command": command,
     }
     (models / BODIES_METRICS).write_text(json.dumps(content, indent=1) + "\n")

@@ -69,15 +69,19 @@ def render(metrics: dict, command: str) -> str:
         "measurement on the true body, mm (the mean body's in brackets; — where the views did not support it); how "
         f"often the 90 % intervals held (σ × {_per_band(metrics, 'sigma_scale')}, spread × "
         f"{_per_band(metrics, 'spread_scale')} by view count, fitted on other people). "
-        "Identity (`GET /v1/sessions/{id}/identity`): the fitted body's closed spectrum "
-        "ranked against the seed database, where these people are stored in ten poses of their own (none the "
-        "session's): the person scanned answered first / among the first five, the first answer's mean confidence "
-        f"(τ = {metrics['identity_scale']:.3f}), beside the ranking before (the session's union decoded into a body) "
-        "and the person's true body at rest (the most a spectrum can do).",
+        "Identity (`GET /v1/sessions/{id}/identity`): the stored people ranked by the Mahalanobis distance of their "
+        "shape coefficients at rest from the fitted body's, under the fit's posterior, in the seed database, where "
+        "these people are stored in ten poses of their own (none the session's): the person scanned answered first "
+        f"/ among the first five, the first answer's mean confidence (τ = {metrics['shape_identity_scale']:.2f}); "
+        "first by the rankings before, the fitted body's closed spectrum and the session's union decoded into a "
+        "body; first by the person's true body's spectrum at rest (the most a spectrum can do). People stored as "
+        "scans (`POST /v1/shapes`) are ranked less surely, most of all scans in a pose far from rest "
+        "(`python -m benchmarks.identity_from_stored_scans`).",
         "",
         "| views | fitted | body mm (p95) | mean body | " + " | ".join(SHORT[n] for n in names) + " | held: vertices / "
-        "measurements | identity: first / five / confidence | union decoded | true body |",
-        "|---" * (8 + len(names)) + "|",
+        "measurements | identity: first / five / confidence | not stored: warned / falsely | fitted body's spectrum | "
+        "union decoded | true body |",
+        "|---" * (10 + len(names)) + "|",
     ]
     for key, row in rows.items():
         measured = [row["measurements"][n] for n in names if row["measurements"][n]["held"] is not None]
@@ -88,7 +92,9 @@ def render(metrics: dict, command: str) -> str:
             f"| {key} | {row['fitted']} of {row['sessions']} | {row['vertex_mm']:.1f} ({row['vertex_p95_mm']:.0f}) | "
             f"{row['mean_body_mm']:.0f} | " + " | ".join(_cell(row["measurements"][n]) for n in names) + " | "
             f"{percent(row['vertex_held'])} / {percent(held)} | {percent(identity['top1'])} / "
-            f"{percent(identity['top5'])} / {percent(identity['confidence'])} | {today} | "
+            f"{percent(identity['top5'])} / {percent(identity['confidence'])} | "
+            f"{percent(identity['not_stored_warned'])} / {percent(identity['stored_warned'])} | "
+            f"{percent(identity['spectrum_top1'])} | {today} | "
             f"{percent(identity['ceiling_top1'])} |"
         )
     verdicts = "; ".join(f"{goal}: {'met' if met else '**not met**'}" for goal, met in goals(metrics).items())

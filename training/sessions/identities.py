@@ -1,9 +1,11 @@
 """Identity from a session, as ``/v1/sessions/{id}/identity`` ranks it and as the service ranked
-the session's union before: scored against the seed database, where Test C's people are stored in
-ten poses of the build's (none the session's).
+the session before: scored against the seed database, where Test C's people are stored in ten
+poses of the build's (none the session's), each with their shape coefficients at rest
+(``models/seed_bodies.npz``, :func:`write_seed_bodies`).
 
-A ranking here is a person's best ShapeDNA distance over their stored shapes
-(:func:`app.retrieval.distance.distances`, the store's own), for every person of the gallery; the
+A ranking here is a person's best distance over their stored shapes, for every person of the
+gallery: by shape (:func:`app.sessions.identity.shape_distances`, as served) or by the fitted
+body's ShapeDNA distance (:func:`app.retrieval.distance.distances`, the store's own); the
 confidence is :func:`app.sessions.identity.ranked_people`'s softmax, its scale τ the one that
 makes the true person most likely over the calibration sessions.
 """
@@ -12,40 +14,81 @@ from pathlib import Path
 
 import numpy as np
 
+from app.contract import SEED_BODIES_FILE
+from app.inference.bodyfit import BodyBasis, FittedBody
 from app.retrieval.distance import distances
-from app.retrieval.seed import SEED_FILE
-from app.retrieval.store import Match, ShapeRecord
+from app.retrieval.seed import AT_REST_SPREAD, SEED_FILE, seed_bodies
+from app.retrieval.store import StoredBodies
+from app.sessions.identity import shape_distances
 
 SCALES = np.geomspace(0.005, 2.0, 200)  # the τ tried
 
 
 class Gallery:
-    """Stored people's closed spectra: the seed database and, for calibration, people added."""
+    """Stored people's closed spectra and shape coefficients at rest: the seed database and, for
+    calibration, people added."""
 
-    def __init__(self, labels: np.ndarray, spectra: np.ndarray) -> None:
-        self.labels, self.spectra = labels, spectra
+    def __init__(self, labels: np.ndarray, spectra: np.ndarray, coefficients: np.ndarray) -> None:
+        self.labels, self.spectra, self.coefficients = labels, spectra, coefficients
 
     @classmethod
     def seed(cls, models: Path) -> "Gallery":
         data = np.load(models / SEED_FILE)
-        return cls(np.asarray([str(label) for label in data["labels"]]), data["spectra"].astype(np.float64))
+        labels = [str(label) for label in data["labels"]]
+        stored = seed_bodies(models, labels)
+        if stored is None:
+            raise FileNotFoundError(f"{models / SEED_BODIES_FILE} is missing or lacks a seed person")
+        coefficients = np.stack([body.coefficients for body in stored])
+        return cls(np.asarray(labels), data["spectra"].astype(np.float64), coefficients)
 
-    def with_people(self, labels: list[str], spectra: np.ndarray) -> "Gallery":
-        return Gallery(np.concatenate([self.labels, labels]), np.concatenate([self.spectra, spectra]))
+    def with_people(self, labels: list[str], spectra: np.ndarray, coefficients: np.ndarray) -> "Gallery":
+        return Gallery(
+            np.concatenate([self.labels, labels]),
+            np.concatenate([self.spectra, spectra]),
+            np.concatenate([self.coefficients, coefficients]),
+        )
 
-    def matches(self, spectrum: np.ndarray, count: int) -> list[Match]:
-        """The ``count`` stored shapes nearest ``spectrum``, as the store answers them."""
-        found = distances(spectrum, self.spectra)
-        nearest = np.argsort(found, kind="stable")[:count]
-        return [Match(ShapeRecord(str(i), str(self.labels[i]), "gallery", [], ""), float(found[i])) for i in nearest]
+    def bodies(self) -> StoredBodies:
+        """The gallery as the store's bodies (each read at rest)."""
+        ids = [str(i) for i in range(len(self.labels))]
+        spread = np.full(len(self.labels), AT_REST_SPREAD)
+        return StoredBodies(ids, [str(label) for label in self.labels], self.coefficients, spread)
+
+    def shape_distances(self, fitted: FittedBody) -> dict[str, float]:
+        """Each stored person's distance by shape: their nearest stored body's, as served."""
+        return _per_person(self.labels, shape_distances(fitted, self.bodies()))
 
     def person_distances(self, spectrum: np.ndarray) -> dict[str, float]:
-        """Each stored person's distance: their nearest stored shape's."""
-        found = distances(spectrum, self.spectra)
-        best: dict[str, float] = {}
-        for label, distance in zip(self.labels, found, strict=True):
-            best[label] = min(best.get(label, np.inf), float(distance))
-        return best
+        """Each stored person's ShapeDNA distance: their nearest stored shape's."""
+        return _per_person(self.labels, distances(spectrum, self.spectra))
+
+
+def _per_person(labels: np.ndarray, found: np.ndarray) -> dict[str, float]:
+    best: dict[str, float] = {}
+    for label, distance in zip(labels, found, strict=True):
+        best[label] = min(best.get(label, np.inf), float(distance))
+    return best
+
+
+def rest_coefficients(basis: BodyBasis, rest: np.ndarray) -> np.ndarray:
+    """(C,) the whitened shape coefficients of a body at rest (V, 3): its least-squares projection
+    on the basis (the basis is a PCA of anny's rest-pose bodies, in their frame)."""
+    flat = basis.components.reshape(len(basis.components), -1).T
+    return np.linalg.lstsq(flat, (rest - basis.mean).ravel(), rcond=None)[0]
+
+
+def write_seed_bodies(models: Path, basis: BodyBasis) -> None:
+    """``models/seed_bodies.npz``: each seed person's shape coefficients at rest, for the seed
+    database's bodies (the standard build's identities, drawn again as the build draws them)."""
+    from training.data.bodies import AnnySource
+    from training.sessions.scans import build_identities, rest_body
+
+    source = AnnySource()
+    drawn = build_identities(source)
+    coefficients = np.stack([rest_coefficients(basis, rest_body(source, row[2])) for row in drawn])
+    np.savez_compressed(
+        models / SEED_BODIES_FILE, labels=np.asarray([row[3] for row in drawn]), coefficients=coefficients
+    )
 
 
 def rank_of(person_distances: dict[str, float], label: str) -> int:

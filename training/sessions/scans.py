@@ -74,41 +74,56 @@ def people(count: int, seed: int) -> tuple[RegionSampler, list[Person]]:
     return sampler, found
 
 
+def build_identities(source, seed: int = 0) -> list[tuple[int, int, object, str, str]]:
+    """Every identity of the standard build, drawn from ``source`` (an AnnySource) as the build
+    draws them: (group number, index in the group, anny identity, seed database label, group
+    name), group after group."""
+    from training.data.presets import PRESETS, groups_of
+
+    drawn, first = [], 0  # the build numbers identities across its groups, in order
+    for number, group in enumerate(groups_of(PRESETS["standard"])):
+        if group.count > 0:
+            label = group.name.split("_")[-1]
+            identities = source.body.sample_identities(seed * 100 + number, label, group.name, group.count)
+            drawn += [
+                (number, index, identity, f"{group.name}-{first + index:03d}", group.name)
+                for index, identity in enumerate(identities)
+            ]
+        first += group.count
+    return drawn
+
+
 def test_c_people(count: int, seed: int = 0) -> tuple[RegionSampler, list[Person]]:
     """The first ``count`` people of the standard build's held-out groups (Test C's people:
     unknown men, unknown women, children, drawn as the build draws them, taken in turn), each in
     a pose of its own (not one of the build's), and their sessions."""
     from training.data.bodies import AnnySource
-    from training.data.presets import PRESETS, TRAINING_GROUPS, groups_of
+    from training.data.presets import TRAINING_GROUPS
 
     source = AnnySource()
     sampler = RegionSampler(source.template())
-    drawn, first = [], 0  # the build numbers identities across its groups, in order
-    for number, group in enumerate(groups_of(PRESETS["standard"])):
-        if group.name not in TRAINING_GROUPS and group.count > 0:
-            label = group.name.split("_")[-1]
-            identities = source.body.sample_identities(seed * 100 + number, label, group.name, group.count)
-            drawn.append(
-                [
-                    (number, index, identity, f"{group.name}-{first + index:03d}")
-                    for index, identity in enumerate(identities)
-                ]
-            )
-        first += group.count
-    in_turn = [person for row in zip(*drawn, strict=False) for person in row][:count]  # a man, a woman, a child, …
+    held_out = [row for row in build_identities(source, seed) if row[4] not in TRAINING_GROUPS]
+    groups = sorted({row[0] for row in held_out})
+    by_group = [[row for row in held_out if row[0] == number] for number in groups]
+    in_turn = [person for row in zip(*by_group, strict=False) for person in row][:count]  # a man, a woman, a child, …
     found = []
-    for number, index, identity, seed_label in in_turn:
+    for number, index, identity, seed_label, _ in in_turn:
         rng = np.random.default_rng([seed, number, index, SESSION_STREAM])
         found.append(_scanned(source, sampler, identity, rng, seed_label))
     return sampler, found
+
+
+def rest_body(source, identity) -> np.ndarray:
+    """(n, 3) an anny identity's body in the rest pose (``source``: an AnnySource)."""
+    body = source.body
+    return np.asarray(body.pose(identity, np.tile(np.eye(4), (1, len(body.bones), 1, 1)))[0], np.float64)
 
 
 def _scanned(source, sampler: RegionSampler, identity, rng: np.random.Generator, label: str) -> Person:
     """One person posed at random and scanned, and the same person at rest."""
     body = source.body.pose(identity, source.body.valid_poses(identity, rng, 1, rest_first=False))[0]
     masks = session_masks(sampler, body, rng)
-    rest = source.body.pose(identity, np.tile(np.eye(4), (1, len(source.body.bones), 1, 1)))[0]
-    return Person(np.asarray(body, np.float64), masks, np.asarray(rest, np.float64), label)
+    return Person(np.asarray(body, np.float64), masks, rest_body(source, identity), label)
 
 
 def view_meshes(person: Person, faces: np.ndarray, variant: str) -> list[Mesh]:

@@ -18,12 +18,12 @@ from app.api.deps import ModelsDep, SessionsDep, StoreDep
 from app.api.examples import success
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, ProblemError, problem_responses
 from app.api.rebuilt import solved_body
-from app.api.responses import MODEL_VERSION_FIELD, PersonAnswer, answered_people
+from app.api.responses import MODEL_VERSION_FIELD, PersonAnswer, answered, answered_people
 from app.api.routes.sessions import ROUTE, SESSION_SLUGS, SessionId, not_found
 from app.inference.bodyfit import FittedBody, NotEnoughSeen
 from app.inference.models import SpectralModels
 from app.sessions.body import SEEN, NoBodyFits, SessionBody, fitted_session, session_body
-from app.sessions.identity import SHAPES_PER_PERSON
+from app.sessions.identity import SHAPES_PER_PERSON, ranked_by_shape, unknown_warning
 from app.sessions.reading import SessionState, session_state
 from app.sessions.records import SessionNotFound
 from app.sessions.session import session_coverage
@@ -68,11 +68,14 @@ class IdentityAnswer(BaseModel):
     id: str = Field(description="The session's id.")
     model_version: str = MODEL_VERSION_FIELD
     views: int = Field(description="The views the body was fitted to.")
-    ranked_by: Literal["fitted_body"] = Field(
-        description="fitted_body: the stored shapes ranked by their distance to the closed spectrum of the body "
-        "fitted to the session's views (its union, an open surface, does not compare with stored closed bodies)."
+    ranked_by: Literal["shape", "fitted_body"] = Field(
+        description="shape: the stored shapes that have a body ranked by how far their person's shape coefficients "
+        "are from the body fitted to the session's views, under what the views left uncertain; fitted_body (where "
+        "no stored shape has a body): by their ShapeDNA distance to that body's closed spectrum."
     )
-    looked_up: list[float] = Field(description="The fitted body's closed spectrum, 1/m².")
+    looked_up: list[float] | None = Field(
+        description="Ranked by fitted_body: the fitted body's closed spectrum, 1/m² (null when ranked by shape)."
+    )
     people: list[PersonAnswer] = Field(description="One per stored person, nearest first.")
     warnings: list[str] = Field(description="When the first person is not clearly ahead of the others.")
 
@@ -113,17 +116,22 @@ async def session_identity_route(
     with a calibrated confidence."""
     state = await _session(request, models, sessions, session_id)
     fitted = await _fit(_fitted, models, state)
-    _, spectrum = await solved_body(request, models, fitted.vertices(models.body))
+    basis = models.body
+    bodies = await anyio.to_thread.run_sync(store.bodies)
+    common = {"id": session_id, "model_version": models.version, "views": len(state.views)}
+    if bodies.ids:
+        ranked = ranked_by_shape(fitted, bodies, top, basis.shape_identity_scale, basis.unknown_distance)
+        people, warnings = answered(ranked, calibrated=True)
+        warnings += unknown_warning(ranked[0] if ranked else None, basis.unknown_distance)
+        unranked = await anyio.to_thread.run_sync(store.count) - len(bodies.ids)
+        if unranked:
+            warnings.append(f"{unranked} stored shapes have no body (none fitted their scan) and are not ranked")
+        return IdentityAnswer(**common, ranked_by="shape", looked_up=None, people=people, warnings=warnings)
+    _, spectrum = await solved_body(request, models, fitted.vertices(basis))
     matches = await anyio.to_thread.run_sync(store.nearest, spectrum, top * SHAPES_PER_PERSON)
-    people, ahead = answered_people(matches, top, models.body.identity_scale)
+    people, warnings = answered_people(matches, top, basis.identity_scale)
     return IdentityAnswer(
-        id=session_id,
-        model_version=models.version,
-        views=len(state.views),
-        ranked_by="fitted_body",
-        looked_up=spectrum.tolist(),
-        people=people,
-        warnings=ahead,
+        **common, ranked_by="fitted_body", looked_up=spectrum.tolist(), people=people, warnings=warnings
     )
 
 

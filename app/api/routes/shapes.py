@@ -14,8 +14,15 @@ from app.api.deps import ModelsDep, SettingsDep, StoreDep, WriteKeyDep
 from app.api.examples import success
 from app.api.operands import CapHolesQuery, ScaleQuery, UnitsQuery, solve_upload, upload_options
 from app.api.problems import DATABASE_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, ProblemError, problem_responses
+from app.api.solver import SolverPool
 from app.geometry.errors import InvalidGeometry
 from app.geometry.io import resolve_file_type
+from app.geometry.pipeline import SpectrumOptions, SpectrumReport
+from app.geometry.plausibility import ImplausibleSize
+from app.inference.models import SpectralModels
+from app.retrieval.store import StoredBody
+from app.sessions.body import stored_body
+from app.sessions.fused import view_of_part
 
 router = APIRouter(tags=["retrieval"])
 ADD_RESPONSES = success("add_shape", 201) | problem_responses(
@@ -35,6 +42,14 @@ class ShapeOut(BaseModel):
     created_at: str = Field(description="When it was stored, ISO 8601 in UTC.")
 
 
+class AddedShape(ShapeOut):
+    body_fitted: bool = Field(
+        description="Whether a body was fitted to the scan and stored with it: identity (GET /v1/sessions/{id}/"
+        "identity) ranks stored people by their bodies' shape. False where the models have no body basis or "
+        "correspondence model, or no body fits the scan (not a person, or a size no person has)."
+    )
+
+
 class ShapePage(BaseModel):
     total: int = Field(description="Shapes stored in all.")
     offset: int = Field(description="Shapes skipped before this page.")
@@ -43,7 +58,7 @@ class ShapePage(BaseModel):
 
 @router.post(
     "/shapes",
-    response_model=ShapeOut,
+    response_model=AddedShape,
     status_code=201,
     responses=ADD_RESPONSES,
     dependencies=[WriteKeyDep],
@@ -58,18 +73,41 @@ async def add_shape(
     units: UnitsQuery = "m",
     scale: ScaleQuery = None,
     cap_holes: CapHolesQuery = False,
-) -> ShapeOut:
-    """Compute a complete shape's spectrum and store it under an identity label."""
+) -> AddedShape:
+    """Compute a complete shape's spectrum and store it under an identity label, with the body
+    fitted to it where one fits (its shape coefficients, what identity ranks people by)."""
     options = upload_options(settings, models.k, units, scale, cap_holes=cap_holes)
-    report = await solve_upload(request, await file.read(), resolve_file_type(file.filename, None), options)
+    data, file_type = await file.read(), resolve_file_type(file.filename, None)
+    report, body = await _solved_with_body(request, models, data, file_type, options)
     if report.boundary != "none":
         raise InvalidGeometry(
             "the store holds complete shapes, and this one has a boundary (its spectrum is a partial "
             "scan's, Dirichlet): send a closed surface, a whole-body scan with cap_holes=true to cap its "
             "blind spots, or unite the parts first"
         )
-    record = await anyio.to_thread.run_sync(store.add, label, np.asarray(report.eigenvalues), file.filename or "upload")
-    return ShapeOut(**record.__dict__)
+    spectrum = np.asarray(report.eigenvalues)
+    record = await anyio.to_thread.run_sync(store.add, label, spectrum, file.filename or "upload", body)
+    return AddedShape(**record.__dict__, body_fitted=body is not None)
+
+
+async def _solved_with_body(
+    request: Request, models: SpectralModels, data: bytes, file_type: str, options: SpectrumOptions
+) -> tuple[SpectrumReport, StoredBody | None]:
+    """The shape's spectrum and, where the models can place and fit it, its body. A shape of a
+    size no person has is stored by its spectrum alone (the store holds any closed shape)."""
+    if models.body is None or models.correspondence is None:
+        return await solve_upload(request, data, file_type, options), None
+    solver: SolverPool = request.app.state.solver
+    try:
+        solved = await solver.solve_with_functions(
+            data, file_type, options, vectors=False, place_with=models.correspondence.path
+        )
+    except ImplausibleSize:
+        return await solve_upload(request, data, file_type, options), None
+    placed = await anyio.to_thread.run_sync(models.correspondence.placed, solved.part, solved.places)
+    geometry, places = view_of_part(solved.part), placed.placement.position
+    body = await anyio.to_thread.run_sync(stored_body, models.body, models.template.vertices, geometry, places)
+    return solved.report, body
 
 
 @router.get(
