@@ -24,7 +24,6 @@ from app.geometry.shapes import Mesh
 from app.inference.models import SpectralModels
 from app.retrieval.store import StoredBodies
 from app.sessions.body import fitted_session, stored_body
-from app.sessions.fused import view_of_part
 from app.sessions.identity import shape_distances
 from training.reconstruction.evaluate import closed_spectrum
 from training.sessions.identities import Gallery, rank_of
@@ -45,10 +44,7 @@ def scanned_gallery(models: SpectralModels, at_rest: bool) -> StoredBodies:
         rng = np.random.default_rng([POSE_STREAM, number, index])
         body = source.body.pose(identity, source.body.valid_poses(identity, rng, 1, rest_first=at_rest))[0]
         solved = solved_view(Mesh(np.asarray(body, np.float64), models.template.faces))
-        placed = models.correspondence.placed(solved.part)
-        stored = stored_body(
-            models.body, models.template.vertices, view_of_part(solved.part), placed.placement.position
-        )
+        stored = stored_body(models.body, models.template.vertices, models.correspondence, solved.part)
         if stored is not None:
             ids.append(label)
             labels.append(label)

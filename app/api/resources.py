@@ -81,10 +81,8 @@ class Resources:
         (503 database-unavailable while it cannot be read)."""
         if self._tokens is None:
             models = self.require_models()
-            configured = self.settings.region_token_keys
-            if configured is not None:
-                keys = [key.strip().encode() for key in configured.get_secret_value().split(",")]
-            else:
+            keys = self.settings.token_keys()
+            if keys is None:
                 sessions = await self.require_sessions()
                 keys = [await anyio.to_thread.run_sync(sessions.service_key, TOKEN_KEY)]
             self._tokens = RegionTokens(keys, models.version)

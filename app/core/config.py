@@ -100,10 +100,17 @@ class Settings(BaseSettings):
     def _keys_long_enough(cls, value: SecretStr | None) -> SecretStr | None:
         """A short key is guessed: refused at start-up rather than signing with it."""
         if value is not None:
-            keys = [key.strip() for key in value.get_secret_value().split(",")]
-            if not all(len(key) >= MIN_KEY_CHARACTERS for key in keys):
+            if not all(len(key) >= MIN_KEY_CHARACTERS for key in _listed(value)):
                 raise ValueError(f"every region token key needs {MIN_KEY_CHARACTERS} characters or more")
         return value
+
+    def token_keys(self) -> list[bytes] | None:
+        """The configured region token keys, the signing one first (None: none configured)."""
+        return None if self.region_token_keys is None else [key.encode() for key in _listed(self.region_token_keys)]
+
+
+def _listed(keys: SecretStr) -> list[str]:
+    return [key.strip() for key in keys.get_secret_value().split(",")]
 
 
 @lru_cache

@@ -14,11 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.contract import INTERVAL_Z
+from app.geometry.descriptors import Places
+from app.geometry.placing import Part
 from app.inference.bodyfit import BodyBasis, FittedBody, NotEnoughSeen, fit_body
+from app.inference.correspondence import CorrespondenceModel
 from app.inference.measurements import MEASUREMENTS, Measurer, supported
 from app.retrieval.store import StoredBody
 from app.sessions.aligned import aligned_views
-from app.sessions.fused import View
+from app.sessions.fused import View, view_of_part
 from app.sessions.session import SessionView
 
 FIT_POINTS = 4000  # the points a fit reads: its cost, about 3 s on one core
@@ -88,12 +91,20 @@ def fitted_views(
     return fitted
 
 
-def stored_body(basis: BodyBasis, template: np.ndarray, geometry: View, places: np.ndarray) -> StoredBody | None:
-    """The body a stored whole-body scan keeps for identity: the shape fitted to it (in the pose it
-    was scanned in, which leaks into the shape: ``basis.posed_spread``), or None where no body
-    fits it (not a person, too little of one)."""
+def stored_body(
+    basis: BodyBasis,
+    template: np.ndarray,
+    correspondence: CorrespondenceModel,
+    part: Part,
+    places: Places | None = None,
+) -> StoredBody | None:
+    """The body a stored whole-body scan (its ``part``, placed on the rest-pose ``template`` by
+    ``places`` a worker computed, else here) keeps for identity: the shape fitted to it (in the
+    pose it was scanned in, which leaks into the shape: ``basis.posed_spread``), or None where no
+    body fits it (not a person, too little of one)."""
+    placed = correspondence.placed(part, places).placement.position
     try:
-        fitted = fitted_views(basis, template, [geometry], [places], registered=True)
+        fitted = fitted_views(basis, template, [view_of_part(part)], [placed], registered=True)
     except (NotEnoughSeen, NoBodyFits):
         return None
     return StoredBody(fitted.coefficients, basis.posed_spread)

@@ -46,8 +46,8 @@ def ranked_people(matches: list[Match], top: int, scale: float) -> list[Candidat
 def shape_distances(fitted: FittedBody, bodies: StoredBodies) -> np.ndarray:
     """(n,) each stored body's Mahalanobis distance from the fitted coefficients, under the fit's
     posterior covariance plus the stored body's spread² on every coefficient. The posterior is
-    not inflated by the vertices' calibrated factor (3.5 at 5 views): that drowned the spread's
-    floor and lost 8–17 points of first place at 3–5 views on Test C."""
+    not inflated by the vertices' calibrated factor: that drowned the spread's floor and lost
+    first places at 3–5 views (decision 039)."""
     found = np.empty(len(bodies.ids))
     for spread in np.unique(bodies.spread):  # one factorization per kind of stored body
         rows = np.flatnonzero(bodies.spread == spread)

@@ -12,7 +12,9 @@ import base64
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
+from app.core.config import Settings
 from app.inference.cover import Cover, InvalidRegion, cover_text
 from app.inference.region_tokens import RegionTokens, UntrustedRegion
 
@@ -87,3 +89,10 @@ def test_earlier_formats_and_non_tokens_are_refused(cover):
 def test_short_keys_are_refused():
     with pytest.raises(ValueError, match="16 bytes"):
         RegionTokens([b"short"], "v1")
+
+
+def test_the_configured_keys_are_read_signing_one_first_and_short_ones_refused_at_start():
+    settings = Settings(region_token_keys=" " + "n" * 20 + " ," + "k" * 16)
+    assert settings.token_keys() == [b"n" * 20, b"k" * 16] and Settings().token_keys() is None
+    with pytest.raises(ValidationError, match="16 characters"):
+        Settings(region_token_keys="k" * 16 + ",short")

@@ -24,7 +24,7 @@ from app.inference.manifest import write_manifest
 from app.inference.measurements import MEASUREMENTS, Measurer
 from app.inference.models import SpectralModels
 from app.sessions.body import NoBodyFits, SessionBody, session_body, stored_body
-from app.sessions.fused import fused_spectrum, view_of_part
+from app.sessions.fused import fused_spectrum
 from app.sessions.identity import Candidate, ranked_rows, unknown_warning
 from app.sessions.session import SessionView, session_coverage, session_union
 from training.glance import CARD, update_glance
@@ -157,8 +157,7 @@ def _posed_spread(served: SpectralModels, basis: BodyBasis, found: list[Person])
     deviations = []
     for person in found:
         solved = solved_view(Mesh(person.body, served.template.faces))
-        placed = served.correspondence.placed(solved.part)
-        stored = stored_body(basis, served.template.vertices, view_of_part(solved.part), placed.placement.position)
+        stored = stored_body(basis, served.template.vertices, served.correspondence, solved.part)
         if stored is not None:
             deviations.append(stored.coefficients - rest_coefficients(basis, person.rest))
     return float(np.sqrt(np.mean(np.square(deviations))))

@@ -77,7 +77,11 @@ class IdentityAnswer(BaseModel):
         description="Ranked by fitted_body: the fitted body's closed spectrum, 1/m² (null when ranked by shape)."
     )
     people: list[PersonAnswer] = Field(description="One per stored person, nearest first.")
-    warnings: list[str] = Field(description="When the first person is not clearly ahead of the others.")
+    warnings: list[str] = Field(
+        description="When the first person is not clearly ahead of the others; by shape, when even the nearest "
+        "stored person is farther than stored people's own scans lie (probably someone not stored), and how many "
+        "stored shapes have no body to rank."
+    )
 
 
 PERSON_PROBLEMS = problem_responses(

@@ -22,7 +22,6 @@ from app.geometry.plausibility import ImplausibleSize
 from app.inference.models import SpectralModels
 from app.retrieval.store import StoredBody
 from app.sessions.body import stored_body
-from app.sessions.fused import view_of_part
 
 router = APIRouter(tags=["retrieval"])
 ADD_RESPONSES = success("add_shape", 201) | problem_responses(
@@ -104,9 +103,11 @@ async def _solved_with_body(
         )
     except ImplausibleSize:
         return await solve_upload(request, data, file_type, options), None
-    placed = await anyio.to_thread.run_sync(models.correspondence.placed, solved.part, solved.places)
-    geometry, places = view_of_part(solved.part), placed.placement.position
-    body = await anyio.to_thread.run_sync(stored_body, models.body, models.template.vertices, geometry, places)
+    if solved.report.boundary != "none":  # refused by the caller: not fitted for nothing
+        return solved.report, None
+    body = await anyio.to_thread.run_sync(
+        stored_body, models.body, models.template.vertices, models.correspondence, solved.part, solved.places
+    )
     return solved.report, body
 
 
