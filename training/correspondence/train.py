@@ -56,19 +56,47 @@ def torch_inputs(part: dict[str, np.ndarray]) -> tuple[torch.Tensor, ...]:
     return tuple(torch.as_tensor(part[name]) for name in CORRESPONDENCE_INPUTS)
 
 
+class OtherRecipe(ValueError):
+    """A run's checkpoint was trained by another recipe than the one asked for."""
+
+
+def recipe(preset: TrainingPreset, seed: int) -> dict:
+    """What decides a run's weights: the preset (its cycles and network) and the seed."""
+    return asdict(preset) | {"config": preset.config.as_dict(), "seed": seed}
+
+
+def cycles_done(checkpoint: dict, preset: TrainingPreset, seed: int) -> int | None:
+    """How many of ``preset``'s cycles ``checkpoint`` holds finished, None where it was trained
+    by another recipe. A checkpoint continues a run only where it was trained by the same recipe,
+    or by one whose cycles are the first of this one's (more cycles added): a name alone says
+    nothing once a width or a feature changed, and a stale checkpoint taken as finished would be
+    exported as if it were this recipe's."""
+    asked, held = recipe(preset, seed), checkpoint.get("training", {}) | {"seed": checkpoint.get("seed")}
+    held_cycles = [(held.get("steps"), held.get("learning_rate")), *map(tuple, held.get("restarts", ()))]
+    same = {key: value for key, value in asked.items() if key not in ("steps", "learning_rate", "restarts")}
+    if any(held.get(key) != value for key, value in same.items()) or held_cycles != preset.cycles[: len(held_cycles)]:
+        return None
+    ends = list(np.cumsum([steps for steps, _ in preset.cycles]))
+    return ends.index(checkpoint["step"]) + 1 if checkpoint["step"] in ends else 0
+
+
 def train(parts_dir: Path, run: Path, preset: TrainingPreset, seed: int = 0, log=print) -> dict:
-    """Train and return the checkpoint. ``run`` holding a checkpoint of the same preset is
-    taken as it is when finished, and continued from the end of its last cycle otherwise: every
-    cycle starts a fresh Adam from the weights the last left, and the parts drawn are the same
-    sequence either way, so a continued run ends where one run from scratch would."""
+    """Train and return the checkpoint. ``run`` holding a checkpoint of the same recipe
+    (:func:`cycles_done`) is taken as it is when finished, and continued from the end of its last
+    cycle otherwise: every cycle starts a fresh Adam from the weights the last left, and the
+    parts drawn are the same sequence either way, so a continued run ends where one run from
+    scratch would. A checkpoint of another recipe is refused (:class:`OtherRecipe`), not
+    overwritten."""
     cycles = preset.cycles
-    done = 0
     checkpoint = torch.load(run, weights_only=False) if run.exists() else None
-    if checkpoint is not None and checkpoint["preset"] == preset.name:
-        if checkpoint["step"] >= sum(steps for steps, _ in cycles):
-            return checkpoint
-        ends = list(np.cumsum([steps for steps, _ in cycles]))
-        done = ends.index(checkpoint["step"]) + 1 if checkpoint["step"] in ends else 0
+    done = cycles_done(checkpoint, preset, seed) if checkpoint is not None else 0
+    if done is None:
+        raise OtherRecipe(
+            f"{run} holds a checkpoint trained by another recipe than preset {preset.name!r} with seed {seed} "
+            "(another network, cycles or seed): move it away or train into another runs folder"
+        )
+    if done == len(cycles):
+        return checkpoint
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     template = Template.load(parts_dir / "template")
@@ -98,7 +126,7 @@ def train(parts_dir: Path, run: Path, preset: TrainingPreset, seed: int = 0, log
             "centres": centres,
             "patch": patch,
             "preset": preset.name,
-            "training": asdict(preset) | {"config": preset.config.as_dict()},
+            "training": recipe(preset, seed),
             "seed": seed,
             "step": len(losses),
             "losses": np.asarray(losses),

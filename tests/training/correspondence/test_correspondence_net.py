@@ -3,6 +3,7 @@ PyTorch on parts of other sizes than the one it was traced on (no anny: an irreg
 patch, with no symmetry to hide a place, is the template)."""
 
 import copy
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,7 @@ from app.inference.template import Template, faces_inside  # noqa: E402
 from tests.conftest import bumpy_patch  # noqa: E402
 from training.correspondence.export import correspondence_parity, export_correspondence, training_path  # noqa: E402
 from training.correspondence.net import CorrespondenceConfig, basis_gradient, stencil_matrices  # noqa: E402
-from training.correspondence.train import TrainingPreset, restored, torch_inputs, train  # noqa: E402
+from training.correspondence.train import OtherRecipe, TrainingPreset, restored, torch_inputs, train  # noqa: E402
 from training.onnx_export import relative_difference  # noqa: E402
 
 CONFIG = CorrespondenceConfig(width=16, blocks=2, patches=24, neighbourhood_m=0.2, offset_m=0.05)
@@ -138,3 +139,19 @@ def test_a_run_stopped_in_a_later_cycle_keeps_the_cycles_it_finished(tmp_path):
     np.testing.assert_array_equal(continued["losses"], scratch["losses"])
     for name, weights in scratch["model"].items():
         torch.testing.assert_close(continued["model"][name], weights, rtol=0, atol=0)
+
+
+def test_a_checkpoint_of_another_recipe_is_refused_not_taken_as_finished(tmp_path):
+    """A finished run of one width, asked for again under the same preset name at another width
+    (or another seed), is neither returned as if it were that recipe's nor overwritten."""
+    parts_dir = _parts_dir(tmp_path)
+    narrow = TrainingPreset(name="cycles", steps=4, learning_rate=5e-3, config=CONFIG)
+    wider = TrainingPreset(name="cycles", steps=4, learning_rate=5e-3, config=replace(CONFIG, width=CONFIG.width * 2))
+    quiet = {"log": lambda _: None}
+    finished = train(parts_dir, tmp_path / "run.pt", narrow, **quiet)
+    with pytest.raises(OtherRecipe):
+        train(parts_dir, tmp_path / "run.pt", wider, **quiet)
+    with pytest.raises(OtherRecipe):
+        train(parts_dir, tmp_path / "run.pt", narrow, seed=1, **quiet)
+    assert train(parts_dir, tmp_path / "run.pt", narrow, **quiet)["step"] == finished["step"] == 4
+    assert torch.load(tmp_path / "run.pt", weights_only=False)["config"]["width"] == CONFIG.width
