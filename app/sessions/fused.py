@@ -17,7 +17,8 @@ boundary edges, and across views where their loose ends meet); a closed loop no 
 :data:`~app.contract.MAX_HOLE_EDGES` boundary edges is a pin-hole between views and is capped
 (its points freed, a point at its centre added), as the spectrum definition caps a mesh's
 pin-holes: without it, the gaps views leave between them pin a nearly closed union to zero and
-every eigenvalue comes out too high.
+every eigenvalue comes out too high. A few boundary points that make no curve with any other
+are freed for the same reason.
 """
 
 from dataclasses import dataclass
@@ -34,11 +35,13 @@ from app.geometry.shapes import PointCloud
 from app.geometry.topology import boundary_half_edges
 
 MIN_TOLERANCE_M = 0.003  # a few mm: one scanner's registered views rarely agree better
-BRIDGE = 1.5  # of the coarser local spacing: two views' loose ends this near, facing, are one seam
+BRIDGE = 0.9  # of the coarser local spacing: two views' loose ends this near, facing, are one seam
 INWARD_NEIGHBOURS = 8  # a boundary point's own neighbours that say which way its view lies
 DUPLICATE = 0.5  # of the finer local spacing: a later view's point this near an earlier one's is the same point
 MEET = 2.0  # of the coarser local spacing: two views' loose ends this near are one stretch of a loop
 FARTHEST = max(1.0, BRIDGE, MEET)  # the farthest any rule looks
+FRAGMENT_POINTS = 4  # boundary points fewer than this, joined to no other, are no boundary
+FRAGMENT_REACH = 3.0  # of the local spacing: how near two boundary points are to be one curve
 
 
 @dataclass(frozen=True)
@@ -126,7 +129,27 @@ def fused_cloud(views: list[View]) -> FusedCloud:
         boundary.append((edge & ~hole)[keep])
     cloud, flags = np.concatenate(points + [centres]), np.concatenate(boundary + [np.zeros(len(centres), bool)])
     flags |= _edges_of_dropped(views, kept, loose, pinholes, cloud)
-    return FusedCloud(cloud, flags, len(centres))
+    return FusedCloud(cloud, _without_fragments(cloud, flags), len(centres))
+
+
+def _without_fragments(points: np.ndarray, flags: np.ndarray) -> np.ndarray:
+    """``flags`` less the boundary points that make no curve: fewer than FRAGMENT_POINTS of them
+    with no other boundary point within FRAGMENT_REACH local spacings. A boundary is a curve;
+    such fragments are what the seam rules leave where views meet at a notch, and on a nearly
+    closed union each one pins the surface to zero around it and lifts every eigenvalue."""
+    flagged = np.flatnonzero(flags)
+    if len(flagged) == 0:
+        return flags
+    reach = cKDTree(points).query(points[flagged], k=min(3, len(points)))[0][:, -1]
+    at = points[flagged]
+    pairs = cKDTree(at).query_pairs(FRAGMENT_REACH * float(reach.max()), output_type="ndarray").reshape(-1, 2)
+    distance = np.linalg.norm(at[pairs[:, 0]] - at[pairs[:, 1]], axis=1)
+    pairs = pairs[distance <= FRAGMENT_REACH * np.maximum(reach[pairs[:, 0]], reach[pairs[:, 1]])]
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), (len(flagged), len(flagged)))
+    _, label = connected_components(graph, directed=False)
+    kept = flags.copy()
+    kept[flagged[np.bincount(label)[label] < FRAGMENT_POINTS]] = False
+    return kept
 
 
 def _inward(view: View, tree: cKDTree, points: np.ndarray) -> np.ndarray:
