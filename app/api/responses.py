@@ -46,7 +46,8 @@ class UnionResponse(UnionInterval):
     overlaps: list[float] = Field(
         default_factory=list,
         description="Each union step's overlap (share of the smaller operand inside the other), as told in "
-        "overlap or measured with measure_overlap; empty when neither.",
+        "overlap, measured with measure_overlap or read from the operands' places (up to the first operand whose "
+        "places are doubted); empty when none.",
     )
     boundaries: list[float] = Field(
         default_factory=list,

@@ -128,7 +128,7 @@ async def union_of_operands(
         overlaps, boundaries = fold.overlaps, fold.boundaries if models.reads_boundary else None
         source = "footprints"
     placed = await anyio.to_thread.run_sync(_placed, models, operands) if places else []
-    covers = [part.cover for part in placed] + (carried or [])
+    covers = [part.counted for part in placed] + (carried or [])
     if len(covers) != len(operands):
         covers = None  # some operand's place is unknown: the spectral localizer and no measured overlap
     told_overlaps, told_boundaries, nesting = overlaps, boundaries, None
@@ -136,12 +136,12 @@ async def union_of_operands(
         fold = template_fold(models, _located(models, placed, carried or []))
         overlaps, boundaries, source = fold.overlaps, fold.boundaries, "correspondence"
         told_overlaps, told_boundaries, nesting = fold.told, fold.told_boundaries, fold.nesting
-    reported = overlaps or []
     started = time.perf_counter()
     values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
     result = await anyio.to_thread.run_sync(models.union, values, told_overlaps, told_boundaries, nesting)
-    nested = list(result.nested) if nesting is not None else [False] * len(reported)
-    told_steps = told_overlaps if told_overlaps is not None else [None] * len(reported)
+    steps = len(operands) - 1 if source is not None else 0  # a doubted operand's steps are read, not measured
+    nested = list(result.nested) if nesting is not None else [False] * steps
+    told_steps = told_overlaps if told_overlaps is not None else [None] * steps
     tell = [share is not None or step for share, step in zip(told_steps, nested, strict=True)]
     seconds = time.perf_counter() - started
     INFERENCE.labels("union").observe(seconds)
@@ -187,13 +187,13 @@ def _uploads(operands: list[Operand]) -> list[Operand]:
 
 
 def _doubts(models: SpectralModels, operands: list[Operand], placed: list[PlacedPart]) -> list[str]:
-    """A warning for each placed upload whose places are too uncertain to trust its region."""
+    """A warning for each placed upload whose places cannot be trusted (left out of its region)."""
     if not placed:
         return []
     return [
         f"{operand.source}: {warning}"
         for operand, part in zip(_uploads(operands), placed, strict=True)
-        for warning in models.correspondence.doubts(part.placement)
+        for warning in part.doubts
     ]
 
 

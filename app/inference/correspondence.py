@@ -65,6 +65,13 @@ TELL_BELOW_KEY = "tell_overlap_below"
 # region's IoU (correlation 0.9 on validation draws), and shapes that are no body part (a plane,
 # a torus, a capsule) are placed with a sixth to a third of a body part's.
 UNCERTAIN_BELOW_KEY = "uncertain_below_confidence"
+# A body part's places keep its area: carried to the template, it covers a region of about its
+# own area over the person's scale squared (0.73–1.09 of it on calibration people's views and
+# regions; a 2.4 m adult would be 0.5). A shape that is no body part can be placed confidently
+# and still crowd its places onto a spot: a closed ball of 10 cm lands on 9 % of its area at
+# confidence 0.84. Below this share its places are doubted whatever their confidence
+# (docs/decisions/040-a-part-whose-places-crowd-is-no-body-part.md).
+CROWDED_BELOW = 0.5
 
 
 @dataclass(frozen=True)
@@ -85,15 +92,33 @@ class Placement:
 
 @dataclass(frozen=True)
 class PlacedPart:
-    """A part placed on the template, and what it covers there."""
+    """A part placed on the template, what it covers there, and what makes its places doubtful
+    (warnings; none where they can be trusted)."""
 
     placement: Placement
     cover: Cover
+    doubts: tuple[str, ...] = ()
 
     @property
     def region(self) -> np.ndarray:
         """(V,) bool: the template region it covers."""
         return self.cover.region
+
+    @property
+    def trusted(self) -> bool:
+        """Whether its region may count: in coverage, regions and measured overlaps."""
+        return not self.doubts
+
+    @property
+    def counted(self) -> Cover:
+        """What it covers as far as coverage, regions and overlaps count it (:func:`counted`)."""
+        return counted(self.cover, self.trusted)
+
+
+def counted(cover: Cover, trusted: bool) -> Cover:
+    """``cover`` as coverage, regions and measured overlaps count it: nothing where the places it
+    was read from are doubted (a made-up region must not say where the body was seen)."""
+    return cover if trusted else Cover.of_region(np.zeros_like(cover.region))
 
 
 class TemplateRegions:
@@ -230,17 +255,26 @@ class CorrespondenceModel:
         confidence = places.confidence.astype(np.float64)
         return Placement(position, confidence, nearest, part.mass.astype(np.float64), part.boundary)
 
-    def doubts(self, placement: Placement) -> list[str]:
-        """A warning where the part's places are too uncertain to trust its region (see
-        :data:`UNCERTAIN_BELOW_KEY`): what a front-end should show before it reads the coverage."""
+    def doubts(self, placement: Placement, cover: Cover) -> list[str]:
+        """A warning where the part's places cannot be trusted: too uncertain (see
+        :data:`UNCERTAIN_BELOW_KEY`) or crowded onto a spot (:data:`CROWDED_BELOW`). Such a part's
+        region is left out of coverage, regions and measured overlaps."""
+        found = []
         confidence, below = placement.mean_confidence, self.uncertain_below
-        if confidence >= below:
-            return []
-        return [
-            f"its places on the template are uncertain (mean confidence {confidence:.2f}, below {below:.2f}, where "
-            "few body parts are placed): not part of a human body, or a view the model cannot place; its region, "
-            "coverage and measured overlaps are unreliable"
-        ]
+        if confidence < below:
+            found.append(
+                f"its places on the template are uncertain (mean confidence {confidence:.2f}, below {below:.2f}, "
+                "where few body parts are placed): not part of a human body, or a view the model cannot place"
+            )
+        kept = float(self.regions.vertex_area[cover.region].sum()) / float(placement.area.sum())
+        if kept < CROWDED_BELOW:
+            found.append(
+                f"its places crowd onto a template region of {100 * kept:.0f} % of its own area (a body part's "
+                f"keep at least {100 * CROWDED_BELOW:.0f} %): not part of a human body, or sent in other units"
+            )
+        if found:
+            found.append("its region is left out of coverage, regions and measured overlaps")
+        return found
 
     def cover(self, placement: Placement) -> Cover:
         """What the placed part covers on the template."""
@@ -249,4 +283,5 @@ class CorrespondenceModel:
     def placed(self, part: Part, places: Places | None = None) -> PlacedPart:
         """The part placed (by ``places`` a worker computed, else here) and what it covers."""
         placement = self.place(part) if places is None else self.placement(part, places)
-        return PlacedPart(placement, self.cover(placement))
+        cover = self.cover(placement)
+        return PlacedPart(placement, cover, tuple(self.doubts(placement, cover)))

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from app.inference.correspondence import PlacedPart
+from app.inference.correspondence import PlacedPart, counted
 from app.inference.cover import Cover
 from app.inference.models import SpectralModels, UnionEstimate
 from app.inference.nesting import Nesting
@@ -20,28 +20,36 @@ from app.inference.nesting import Nesting
 
 @dataclass(frozen=True)
 class Located:
-    """An operand's place on the template: what it covers, the area-weighted mean confidence of
-    its places (1 for a region carried in a token: nothing placed here to doubt) and its own
-    area (m²; a carried region's template area)."""
+    """An operand's place on the template: what it was placed on, the area-weighted mean
+    confidence of its places (1 for a region carried in a token: nothing placed here to doubt),
+    its own area (m²; a carried region's template area) and whether its place is trusted."""
 
     cover: Cover
     confidence: float
     area: float
+    trusted: bool = True
 
     @classmethod
     def placed(cls, part: PlacedPart) -> "Located":
         """An upload as the correspondence model placed it."""
-        return cls(part.cover, part.placement.mean_confidence, float(part.placement.area.sum()))
+        return cls(part.cover, part.placement.mean_confidence, float(part.placement.area.sum()), part.trusted)
 
     @classmethod
     def carried(cls, cover: Cover, vertex_area: np.ndarray) -> "Located":
         """A region sent in a token beside a spectrum."""
         return cls(cover, 1.0, float(vertex_area[cover.region].sum()))
 
+    @property
+    def counted(self) -> Cover:
+        """What it covers as far as coverage, regions and overlaps count it: nothing where its
+        place is doubted."""
+        return counted(self.cover, self.trusted)
+
 
 @dataclass(frozen=True)
 class TemplateFold:
-    """Each union step's overlap and boundary share read on the template, and what the union
+    """Each union step's overlap and boundary share read on the template (the steps before the
+    first operand whose place is doubted: no overlap is known with it), and what the union
     operator is told of them (None where a step is left untold)."""
 
     overlaps: list[float]
@@ -52,11 +60,19 @@ class TemplateFold:
 
 
 def template_fold(models: SpectralModels, located: list[Located]) -> TemplateFold:
-    """The steps of a left-to-right fold of ``located`` operands, read from their regions."""
-    regions = [operand.cover.region for operand in located]
+    """The steps of a left-to-right fold of ``located`` operands, read from their regions; from
+    the first operand whose place is doubted on, no step is told (its region is not known, so
+    neither is any overlap measured with it in the union)."""
+    regions = [operand.counted.region for operand in located]
     overlaps, boundaries = models.template_regions.fold(regions)
     boundaries = boundaries if models.reads_boundary else None
+    trusted = [operand.trusted for operand in located]
+    known = max(trusted.index(False) - 1, 0) if not all(trusted) else len(overlaps)  # steps before the first doubted
+    overlaps, boundaries = overlaps[:known], None if boundaries is None else boundaries[:known]
     told, edges = _worth_telling(models, overlaps, boundaries)
+    untold = [None] * (len(located) - 1 - known)
+    told = None if told is None else told + untold
+    edges = None if edges is None else edges + untold
     confidence = [operand.confidence for operand in located]
     area = [operand.area for operand in located]
     return TemplateFold(overlaps, boundaries, told, edges, _nesting(models, confidence, area))

@@ -57,6 +57,7 @@ def view_row(view: SessionView) -> tuple:
         boundary=geometry.boundary,
         edges=geometry.edges.astype(np.int32),
         places=view.places.astype(np.float32),
+        trusted=np.bool_(view.located.trusted),
     )
     return (
         view.source,
@@ -80,8 +81,9 @@ def view_of_row(row: tuple, template_vertices: int) -> SessionView:
             arrays["edges"].astype(np.int64),
         )
         places = arrays["places"].astype(np.float64)
+        trusted = bool(arrays["trusted"]) if "trusted" in arrays else True
     cover = cover_of_text(region, template_vertices, "stored view")
-    located = Located(cover, float(confidence), float(area))
+    located = Located(cover, float(confidence), float(area), trusted)
     values = np.frombuffer(bytes(eigenvalues), dtype=np.float64).copy()
     return SessionView(source, values, view, places, located, tuple(json.loads(warnings)))
 

@@ -91,14 +91,14 @@ def session_union(
         return SessionUnion(UnionEstimate(solved, bands.sigma(solved, len(views))), by)
     fold = template_fold(models, [view.located for view in views])
     estimate = chained_union(models, [view.eigenvalues for view in views], fold)
-    told = fold.told or [None] * len(fold.overlaps)
+    told = fold.told or [None] * (len(views) - 1)
     steps = [share is not None or nested for share, nested in zip(told, estimate.nested, strict=True)]
     return SessionUnion(estimate, by, fold.overlaps, steps)
 
 
 def session_cover(views: list[SessionView]) -> Cover | None:
     """What the session's views cover on the template together (None before the first)."""
-    return united([view.located.cover for view in views]) if views else None
+    return united([view.located.counted for view in views]) if views else None
 
 
 def session_coverage(models: SpectralModels, views: list[SessionView]) -> dict[str, float]:

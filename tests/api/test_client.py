@@ -6,7 +6,10 @@ import pytest
 import trimesh
 
 from app.client import Client, ServiceProblem
+from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
+from app.inference.template import Template
+from app.samples import PARTS, template_part
 from tests.api.conftest import API_KEY
 from tests.builders import mesh_bytes
 from tests.conftest import bumpy_patch, sphere
@@ -23,6 +26,14 @@ def scans():
     return [(f"patch{seed}.ply", mesh_bytes(bumpy_patch(seed=seed, n=500), "ply")) for seed in (1, 2)]
 
 
+@pytest.fixture(scope="module")
+def body_scans():
+    """Two parts of the template body (a patch is no body part: its places are doubted, its
+    region counts nothing and gets no token), as (file name, bytes)."""
+    template = Template.load(Settings().models_dir)
+    return [(name, template_part(template, removed)) for name, removed in PARTS.items()]
+
+
 def test_a_spectrum_is_the_pipelines(service):
     patch = bumpy_patch(seed=1, n=500)
     report = service.spectrum(("patch.ply", mesh_bytes(patch, "ply")), k=12)
@@ -32,11 +43,12 @@ def test_a_spectrum_is_the_pipelines(service):
 
 
 def test_a_union_of_files_equals_the_union_of_their_spectra_in_either_order(service, scans):
-    """Files are united told the overlap their places on the template measure; their spectra
-    told the same, in either order, give the same union."""
+    """Files are united told the overlap their places on the template measure (none for these
+    bumpy patches, no body part: their places are doubted); their spectra told the same, in
+    either order, give the same union."""
     by_files = service.union(files=scans)
     spectra = [operand.eigenvalues for operand in by_files.operands]
-    told = {"overlap": by_files.overlaps, "boundary": by_files.boundaries or None}
+    told = {"overlap": by_files.overlaps or None, "boundary": by_files.boundaries or None}
     by_spectra = service.union(spectra=spectra[::-1], **told)
     np.testing.assert_allclose(by_spectra.eigenvalues, by_files.eigenvalues, rtol=1e-6)
     mixed = service.union(files=scans[:1], spectra=spectra[1:], **told)
@@ -128,9 +140,10 @@ def test_a_ball_with_a_hole_is_stored_and_retrieved_once_its_hole_is_capped(serv
     service.delete_shape(stored.id)
 
 
-def test_scans_placed_once_are_united_as_spectra_with_their_regions(service, scans):
+def test_scans_placed_once_are_united_as_spectra_with_their_regions(service, body_scans):
     """The client's correspondence and regions: two scans placed one by one, then sent back as
     spectra with their region tokens, are localized and united as the uploads are."""
+    scans = body_scans
     placed = [service.correspondence(scan) for scan in scans]
     assert all(part.vertices == len(part.position) and part.places == "network" for part in placed)
     relaxed = service.correspondence(scans[0], places="relaxed")

@@ -280,6 +280,21 @@ def test_a_ball_is_no_body(client):
     assert "do not fit a body" in answer.json()["detail"]
 
 
+def test_a_ball_covers_nothing_and_a_restart_still_knows_it(client, scans):
+    """A ball beside a real view adds no coverage (its places crowd onto a spot: doubted), and
+    the view read back from the database is still doubted: its made-up region is not told to the
+    union's next step as an overlap of nothing."""
+    ball = trimesh.creation.icosphere(subdivisions=4, radius=0.1).export(file_type="ply")
+    session = new_session(client)["id"]
+    alone = add(client, session, HEAD_SIDE, scans[HEAD_SIDE]).json()
+    with_ball = add(client, session, "ball.ply", ball).json()
+    assert with_ball["part_coverage"] == pytest.approx(alone["part_coverage"])
+    assert any("not part of a human body" in w for w in with_ball["views"][1]["warnings"])
+    read = client.get(f"/v1/sessions/{session}").json()
+    assert read["part_coverage"] == pytest.approx(alone["part_coverage"])
+    assert read["overlaps_told"] == [False]
+
+
 def test_models_without_a_body_basis_say_so(tmp_path, client):
     """The served models fit bodies and say so; a models folder without body.npz (not in its
     manifest) says it does not, and a session's body is a 501 problem there."""

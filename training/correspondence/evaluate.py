@@ -164,7 +164,7 @@ def evaluate_correspondence(parts_dir: Path, graph: Path, models: Path) -> dict:
                     perfect,
                     template,
                     served.vertex_area,
-                    bool(model.doubts(placement)),
+                    bool(model.doubts(placement, cover)),
                 )
             )
         table[name] = {variant: _mean(scores) for variant, scores in rows.items() if scores}

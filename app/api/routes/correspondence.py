@@ -36,10 +36,11 @@ class CorrespondenceRegion(BaseModel):
         description="Covered share of each body part's area, summed from how much of the template around each "
         "vertex the part's placed area fills (the gaps between a ragged view's strips do not count)."
     )
-    token: str = Field(
+    token: str | None = Field(
         description="The region and its covered shares as a token: send it in regions beside this part's "
         "spectrum, so later unions and localizations place the part, and read its coverage, without uploading it "
-        "again."
+        "again. Null, with a warning saying why, where the part's places are doubted (its region left empty): a "
+        "token would tell later unions a region nobody knows."
     )
 
 
@@ -129,7 +130,8 @@ async def correspondence(
     )
     INFERENCE.labels("correspondence").observe(solved.places.graph_ms / 1e3)
     placed = await anyio.to_thread.run_sync(models.correspondence.placed, solved.part, solved.places)
-    placement, region = placed.placement, placed.region
+    placement, cover = placed.placement, placed.counted  # a doubted part's region counts nothing
+    region = cover.region
     if format == "npz":
         return Response(
             _npz(solved, placement, region, places),
@@ -141,7 +143,7 @@ async def correspondence(
         return Response(
             ply, media_type="application/ply", headers={"content-disposition": "inline; filename=correspondence.ply"}
         )
-    covered = models.region_of(region, placed.cover.share)
+    covered = models.region_of(region, cover.share)
     return CorrespondenceResponse(
         model_version=models.version,
         eigenvalues=solved.report.eigenvalues,
@@ -157,10 +159,10 @@ async def correspondence(
             vertices=covered.vertices.tolist(),
             area_fraction=covered.area_fraction,
             part_coverage=covered.part_coverage,
-            token=tokens.issue(placed.cover, np.asarray(solved.report.eigenvalues)),
+            token=tokens.issue(cover, np.asarray(solved.report.eigenvalues)) if placed.trusted else None,
         ),
         template_vertices=len(models.template.vertices),
-        warnings=solved.report.warnings + models.correspondence.doubts(placement),
+        warnings=solved.report.warnings + list(placed.doubts),
     )
 
 

@@ -68,7 +68,10 @@ class SessionViewAnswer(BaseModel):
     eigenvalues: list[float] = Field(description="The view's own spectrum, 1/m².")
     area: float = Field(description="The view's area, m².")
     mean_confidence: float = Field(description="Area-weighted mean confidence of its places on the template.")
-    region_token: str = Field(description="Where it lies on the template (send it in regions beside its spectrum).")
+    region_token: str | None = Field(
+        description="Where it lies on the template (send it in regions beside its spectrum); null where its places "
+        "are doubted (a warning says why): its region counts in no coverage or overlap."
+    )
     warnings: list[str] = Field(description="What its solve or its placing found doubtful.")
 
 
@@ -88,7 +91,8 @@ class SessionResponse(UnionInterval):
         "overlaps their places say)."
     )
     overlaps: list[float] = Field(
-        description="learned-chain: each union step's overlap read on the template (empty otherwise)."
+        description="learned-chain: each union step's overlap read on the template, up to the first view whose "
+        "places are doubted (empty otherwise)."
     )
     overlaps_told: list[bool] = Field(description="learned-chain: per step, whether the operator was told it.")
     area_fraction: float = Field(description="Share of the template's area the views cover together.")
@@ -169,7 +173,7 @@ async def add_view(
         data, resolved_type, options, vectors=False, place_with=models.correspondence.path
     )
     placed = await anyio.to_thread.run_sync(models.correspondence.placed, solved.part, solved.places)
-    view = session_view(file.filename or "", solved, placed, models.correspondence.doubts(placed.placement))
+    view = session_view(file.filename or "", solved, placed, list(placed.doubts))
     try:
         await anyio.to_thread.run_sync(sessions.add_view, session_id, view, settings.session_max_views)
     except SessionNotFound:
@@ -238,7 +242,7 @@ def _shaped(state: SessionState, models: SpectralModels, tokens: RegionTokens, t
                 eigenvalues=view.eigenvalues.tolist(),
                 area=view.located.area,
                 mean_confidence=view.located.confidence,
-                region_token=tokens.issue(view.located.cover, view.eigenvalues),
+                region_token=tokens.issue(view.located.cover, view.eigenvalues) if view.located.trusted else None,
                 warnings=list(view.warnings),
             )
             for index, view in enumerate(views)
