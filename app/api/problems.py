@@ -212,6 +212,19 @@ def _allowed_methods(request: Request) -> list[str]:
     return sorted(methods)
 
 
+async def _sent_fields(request: Request) -> list[str]:
+    """The names of the form fields a request sent (its form was parsed already, and is read
+    from the cache; none for a request that is no form)."""
+    kind = request.headers.get("content-type", "")
+    if not kind.startswith(("multipart/form-data", "application/x-www-form-urlencoded")):
+        return []
+    try:
+        form = await request.form()
+    except Exception:  # a form that cannot be parsed was answered 400 before validation
+        return []
+    return sorted({f"'{name}'" for name in form.keys()})
+
+
 def install_problem_handlers(app: FastAPI) -> None:
     """Route every error through the one problem+json shape; none leaks as HTML or plain text."""
 
@@ -220,8 +233,12 @@ def install_problem_handlers(app: FastAPI) -> None:
         return problem_response(status_for(exc), exc.slug, exc.title, str(exc))
 
     @app.exception_handler(RequestValidationError)
-    async def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
+    async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:
         detail = "; ".join(f"{'.'.join(str(p) for p in err['loc'])}: {err['msg']}" for err in exc.errors())
+        missing = [err for err in exc.errors() if err.get("type") == "missing" and err["loc"][:1] == ("body",)]
+        sent = await _sent_fields(request) if missing else []
+        if sent:  # a field sent under another name: say which, so the client sees what it did
+            detail += f" (it sent {', '.join(sent)})"
         return problem_response(422, "invalid-request", "Invalid request", detail)
 
     @app.exception_handler(StoreUnavailable)

@@ -3,8 +3,10 @@ answer (``/v1/localize`` and ``/v1/reconstruct`` extend it) and the problems eve
 route can answer, the models' version field, and the media type of ``.npz`` answers."""
 
 from dataclasses import asdict
-from typing import Literal
+from typing import Annotated, Any, Literal
 
+from fastapi import Query
+from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
 from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
@@ -15,6 +17,22 @@ NPZ_MEDIA_TYPE = "application/x-npz"  # numpy's zip of NPY arrays; np.load reads
 # What the union-based routes can answer: an upload's problems, and the models'.
 UNION_PROBLEMS = problem_responses(*UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS)
 MODEL_VERSION_FIELD = Field(description="Content hash of the ONNX models: replicas agree iff they serve the same.")
+DetailQuery = Annotated[
+    Literal["full", "coverage"],
+    Query(
+        description="coverage: the answer without its per-vertex arrays (those fields absent, not empty): a "
+        "front-end that shows what is covered and what to scan next reads a few hundred bytes instead of a few "
+        "hundred kilobytes."
+    ),
+]
+
+
+def shaped(answer: BaseModel, detail: str, per_vertex: dict[str, Any]) -> BaseModel | JSONResponse:
+    """``answer`` whole, or with ``detail`` coverage without its ``per_vertex`` fields (a pydantic
+    exclude: field name → True, or a nested one's)."""
+    if detail == "full":
+        return answer
+    return JSONResponse(answer.model_dump(mode="json", exclude=per_vertex))
 
 
 class OperandSpectrum(BaseModel):

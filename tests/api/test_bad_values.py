@@ -139,6 +139,15 @@ def test_a_partial_surface_is_not_stored_as_a_complete_shape(client):
     assert response.status_code == 201, response.text
 
 
+def test_an_upload_under_another_field_name_is_told_what_it_sent(client):
+    """``-F files=@a.ply`` on /v1/spectrum answered only "body.file: Field required"."""
+    patch = mesh_bytes(bumpy_patch(seed=1, n=300), "ply")
+    response = client.post("/v1/spectrum", files={"files": ("a.ply", patch)})
+    detail = assert_problem(response, 422, "invalid-request")["detail"]
+    assert "body.file" in detail and "it sent 'files'" in detail
+    assert "it sent" not in assert_problem(client.post("/v1/spectrum"), 422, "invalid-request")["detail"]
+
+
 def test_a_request_without_operands_names_the_field_it_should_have_used(client):
     """``-F file=@a.ply`` on /v1/union sent no operand and was answered invalid-spectrum "got 0"."""
     patch = mesh_bytes(bumpy_patch(seed=1, n=300), "ply")

@@ -21,6 +21,7 @@ from app.inference.template import PART_NAMES, Template
 from app.main import create_app
 from app.samples import PARTS, template_part
 from tests.api.conftest import settings_for, settings_without
+from tests.api.test_spectrum_api import assert_problem
 from tests.builders import ascii_ply
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
@@ -407,3 +408,26 @@ def test_a_part_in_the_wrong_units_is_not_placed_but_its_spectrum_is_answered(cl
     assert united.status_code == 422 and united.json()["type"] == "/problems/implausible-size"
     spectrum = client.post("/v1/spectrum", params={"units": "mm"}, files={"file": (name, data)})
     assert spectrum.status_code == 200 and any("units=m" in w for w in spectrum.json()["warnings"])
+
+
+def test_coverage_alone_is_the_full_answer_without_its_per_vertex_arrays(client, samples):
+    """detail=coverage: the same answer less every per-vertex array (absent, not empty), a small
+    fraction of its size."""
+    name, data = next(iter(samples.items()))
+    full = _correspond(client, name, data)
+    short = _correspond(client, name, data, detail="coverage")
+    assert short.status_code == 200 and len(short.content) * 10 < len(full.content)
+    whole, brief = full.json(), short.json()
+    for field in ("vertex_indices", "template_vertex", "position", "confidence"):
+        assert field not in brief and field in whole
+    assert "vertices" not in brief["region"]
+    assert brief["region"]["part_coverage"] == whole["region"]["part_coverage"]
+    assert brief["region"]["token"] == whole["region"]["token"] and brief["warnings"] == whole["warnings"]
+    files = [("files", (n, d)) for n, d in samples.items()]
+    located, brief = (
+        client.post("/v1/localize", files=files).json(),
+        client.post("/v1/localize", files=files, params={"detail": "coverage"}).json(),
+    )
+    assert "vertices" not in brief and "vertex_confidence" not in brief
+    assert brief["part_coverage"] == located["part_coverage"] and brief["eigenvalues"] == located["eigenvalues"]
+    assert_problem(_correspond(client, name, data, detail="vertices"), 422, "invalid-request")

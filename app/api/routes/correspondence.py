@@ -14,7 +14,7 @@ from app.api.examples import success
 from app.api.metrics import INFERENCE
 from app.api.operands import ScaleQuery, UnitsQuery, upload_options
 from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, ProblemError, problem_responses
-from app.api.responses import MODEL_VERSION_FIELD, NPZ_MEDIA_TYPE
+from app.api.responses import MODEL_VERSION_FIELD, NPZ_MEDIA_TYPE, DetailQuery, shaped
 from app.geometry.io import ALLOWED_TYPES, resolve_file_type
 from app.geometry.pipeline import Solved
 from app.inference.correspondence import Placement
@@ -42,6 +42,16 @@ class CorrespondenceRegion(BaseModel):
         "again. Null, with a warning saying why, where the part's places are doubted (its region left empty): a "
         "token would tell later unions a region nobody knows."
     )
+
+
+# What detail=coverage leaves out: every per-vertex array.
+PER_VERTEX = {
+    "vertex_indices": True,
+    "template_vertex": True,
+    "position": True,
+    "confidence": True,
+    "region": {"vertices"},
+}
 
 
 class CorrespondenceResponse(BaseModel):
@@ -112,6 +122,7 @@ async def correspondence(
             "→ red, green, blue)."
         ),
     ] = "json",
+    detail: DetailQuery = "full",
 ) -> CorrespondenceResponse | Response:
     """Each vertex of one partial scan placed on the template body's rest pose, whatever its pose,
     frame or meshing, with a confidence, and the template region the part covers."""
@@ -144,7 +155,7 @@ async def correspondence(
             ply, media_type="application/ply", headers={"content-disposition": "inline; filename=correspondence.ply"}
         )
     covered = models.region_of(region, cover.share)
-    return CorrespondenceResponse(
+    answer = CorrespondenceResponse(
         model_version=models.version,
         eigenvalues=solved.report.eigenvalues,
         vertices=len(placement.vertex),
@@ -164,6 +175,7 @@ async def correspondence(
         template_vertices=len(models.template.vertices),
         warnings=solved.report.warnings + list(placed.doubts),
     )
+    return shaped(answer, detail, PER_VERTEX)
 
 
 def _npz(solved: Solved, placement: Placement, region: np.ndarray, places: PlacesKind) -> bytes:

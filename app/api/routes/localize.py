@@ -11,7 +11,7 @@ from pydantic import Field
 from app.api.deps import region_tokens
 from app.api.examples import success
 from app.api.metrics import INFERENCE
-from app.api.responses import UNION_PROBLEMS, UnionResponse
+from app.api.responses import UNION_PROBLEMS, DetailQuery, UnionResponse, shaped
 from app.api.unions import UnionDep
 from app.inference.cover import united
 from app.inference.template import coloured_template
@@ -55,6 +55,7 @@ async def localize(
     format: Annotated[
         Literal["json", "ply"], Query(description="ply: the template mesh with the region as vertex colours.")
     ] = "json",
+    detail: DetailQuery = "full",
 ) -> LocalizeResponse | Response:
     """Where on the template body the union of the operands lies, and how much of each part it
     covers: for uploaded parts, the union of the regions their vertices are placed on (the
@@ -79,7 +80,7 @@ async def localize(
         return Response(
             ply, media_type="application/ply", headers={"content-disposition": "inline; filename=region.ply"}
         )
-    return LocalizeResponse(
+    answer = LocalizeResponse(
         **outcome.fields(models),
         vertices=region.vertices.tolist(),
         area_fraction=region.area_fraction,
@@ -89,3 +90,4 @@ async def localize(
         region_token=token,
         vertex_confidence=None if confidence is None else np.round(confidence, 3).tolist(),
     )
+    return shaped(answer, detail, {"vertices": True, "vertex_confidence": True})
