@@ -9,8 +9,9 @@ is one too and passes in milliseconds) is counted in on its headers, whole: at m
 together stay under ``byte_budget``. A body is charged as its bytes arrive, after a reservation
 of at most :data:`RESERVATION_BYTES` on admission: charged its declared length (or the upload cap
 when chunked) up front, eight connections sending a byte every 5 s held the whole budget and
-every other upload was refused for a minute. The rest get 503 ``overloaded`` with
-``Retry-After`` at once, their bodies unread, and ``/metrics`` counts them by what was full.
+every other upload was refused for a minute. The rest get 503 ``overloaded`` at once, their
+bodies unread, with a ``Retry-After`` of when the first request in flight is likely done
+(:class:`ServiceTimes`), and ``/metrics`` counts them by what was full.
 
 A place is one solve. A request is admitted on one place and takes one more for each further
 file it solves, once its form is read and before any solve starts (:func:`take_solves`), as far
@@ -23,6 +24,11 @@ on any body, URL-encoded spectra included, so that no request reaches the solver
 uncounted.
 """
 
+import math
+import time
+from collections import deque
+
+import numpy as np
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.api.metrics import UPLOAD_BYTES_IN_FLIGHT, UPLOADS_IN_FLIGHT, UPLOADS_REFUSED
@@ -30,6 +36,28 @@ from app.api.problems import problem_response
 from app.api.solver import RETRY_AFTER_SECONDS
 
 RESERVATION_BYTES = 1024 * 1024  # charged on admission; the body's bytes past it as they arrive
+RECENT_REQUESTS = 64  # how many finished requests' durations say how long the ones in flight will take
+
+
+class ServiceTimes:
+    """How long admitted requests took lately, and so when a place is likely to free: what a
+    refusal's ``Retry-After`` says. A fixed second said nothing true behind a heavy upload that
+    held every place for a minute."""
+
+    def __init__(self, size: int = RECENT_REQUESTS) -> None:
+        self.recent: deque[float] = deque(maxlen=size)
+
+    def record(self, seconds: float) -> None:
+        self.recent.append(seconds)
+
+    def next_free(self, elapsed: list[float]) -> float:
+        """Seconds until the first of the requests in flight (each ``elapsed`` seconds in) is
+        likely done: for each, the median of how much longer the recent requests that ran longer
+        than it has took; a request that has run longer than every recent one is a heavy one,
+        taken to need as long again (a fixed guess would be as wrong for a 5 s one as a 60 s one)."""
+        durations = np.asarray(self.recent, dtype=float)
+        remaining = [float(np.median(durations[durations > e] - e)) if (durations > e).any() else e for e in elapsed]
+        return min(remaining, default=0.0)
 
 
 class Ticket:
@@ -38,6 +66,7 @@ class Ticket:
     def __init__(self, gate: "AdmissionMiddleware") -> None:
         self.gate = gate
         self.places = 1
+        self.started = time.monotonic()
 
     def take(self, solves: int) -> None:
         """Hold a place for each of ``solves``, beyond those held, as far as places remain."""
@@ -74,6 +103,8 @@ class AdmissionMiddleware:
         self.max_body_bytes = max_body_bytes
         self.places = 0
         self.bytes = 0
+        self.tickets: set[Ticket] = set()
+        self.times = ServiceTimes()
 
     def _solves(self, path: str) -> bool:
         """Whether a request without an upload still solves (a decoded or fitted body)."""
@@ -92,6 +123,7 @@ class AdmissionMiddleware:
             await self._refuse(scope, receive, send)
             return
         ticket = Ticket(self)
+        self.tickets.add(ticket)
         self.places += 1
         scope.setdefault("state", {})["admission"] = ticket
         UPLOADS_IN_FLIGHT.inc()
@@ -112,6 +144,8 @@ class AdmissionMiddleware:
             await self.app(scope, counted_receive, send)
         finally:
             self.places -= ticket.places
+            self.tickets.discard(ticket)
+            self.times.record(time.monotonic() - ticket.started)
             self._charge(-charge)
             UPLOADS_IN_FLIGHT.dec()
 
@@ -119,13 +153,21 @@ class AdmissionMiddleware:
         self.bytes += count
         UPLOAD_BYTES_IN_FLIGHT.set(self.bytes)
 
+    def retry_after(self) -> int:
+        """Whole seconds until a place is likely free (:class:`ServiceTimes`), at least
+        RETRY_AFTER_SECONDS."""
+        now = time.monotonic()
+        wait = self.times.next_free([now - ticket.started for ticket in self.tickets])
+        return max(RETRY_AFTER_SECONDS, math.ceil(wait))
+
     async def _refuse(self, scope: Scope, receive: Receive, send: Send) -> None:
+        retry = self.retry_after()
         detail = (
             f"{self.places} solves ({self.bytes} bytes of their uploads) are already being received or run; "
-            f"retry after {RETRY_AFTER_SECONDS} s."
+            f"retry after {retry} s (when the first of them is likely done, from how long requests took lately)."
         )
         response = problem_response(503, "overloaded", "Overloaded", detail)
-        response.headers["Retry-After"] = str(RETRY_AFTER_SECONDS)
+        response.headers["Retry-After"] = str(retry)
         # The body is never asked for: a client that sent ``Expect: 100-continue`` (curl does,
         # for large bodies) gets no 100 and never sends it; one that sends it anyway has it
         # discarded by uvicorn, and its connection stays usable (closing it on unread bytes
