@@ -40,7 +40,7 @@ from app.core.errors import InputError
 from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport, solve_bytes
 from app.geometry.plausibility import placeable_size
 from app.inference.correspondence import places_in_worker
-from app.sessions.aligned import aligned_spectrum
+from app.sessions.aligned import AlignedUnion, aligned_union
 from app.sessions.fused import View, fused_spectrum
 
 RETRY_AFTER_SECONDS = 1  # a solve takes ~0.1–0.3 s: a place frees within a second
@@ -108,13 +108,13 @@ def _solve_task(
     raise SolveMemoryExceeded("the solve needed more memory than a solver worker may use")
 
 
-def _session_task(views: list[View], places: list[np.ndarray] | None, k: int) -> np.ndarray | None:
+def _session_task(views: list[View], places: list[np.ndarray] | None, k: int) -> np.ndarray | AlignedUnion | None:
     """The worker's task for a session's union: registered views fused and solved once
     (:func:`app.sessions.fused.fused_spectrum`), or, with their ``places``, views in their own
-    frames aligned first (:func:`app.sessions.aligned.aligned_spectrum`: None where they do not
-    come together); a memory failure answered as a solve's is."""
+    frames aligned first (:func:`app.sessions.aligned.aligned_union`: those that came together;
+    None where too many did not); a memory failure answered as a solve's is."""
     try:
-        return fused_spectrum(views, k) if places is None else aligned_spectrum(views, places, k)
+        return fused_spectrum(views, k) if places is None else aligned_union(views, places, k)
     except MemoryError:
         pass
     gc.collect()
@@ -207,7 +207,9 @@ class SolverPool:
         SOLVES.observe((solved.report.assembly_ms + solved.report.solve_ms) / 1e3)
         return solved
 
-    async def session_union(self, views: list[View], places: list[np.ndarray] | None, k: int) -> np.ndarray | None:
+    async def session_union(
+        self, views: list[View], places: list[np.ndarray] | None, k: int
+    ) -> np.ndarray | AlignedUnion | None:
         """The first ``k`` eigenvalues of a session's union solved on its views, in a worker under
         the same deadline and memory cap as an upload (:func:`_session_task`)."""
         async with self.limiter:

@@ -9,8 +9,9 @@ surface point: those pairs give each view's motion (a trimmed least-squares fit)
 own points then refine (trimmed iterative closest points on the placed pairs' surroundings).
 Views are joined largest first, each next the one that shares most with those joined and comes
 together with them (a view that does not yet is tried again once more views are joined). Where
-some view never does (another pose, or places too wrong), the views are not aligned and the
-caller falls back to the learned operator.
+some views never do (another pose, or places too wrong), the others are fused as far as those
+left out hold at most :data:`MAX_LEFT_SHARE` of the area (the caller chains them onto that union
+with the learned operator); beyond it the caller reads the session through the learned operator.
 """
 
 from dataclasses import dataclass
@@ -61,10 +62,22 @@ def trimmed_fit(source: np.ndarray, target: np.ndarray) -> Motion:
     return rigid_fit(source[keep], target[keep])
 
 
-def aligned_views(views: list[View], places: list[np.ndarray]) -> list[View] | None:
-    """The views moved into the largest one's frame, in the order given; None where one of them
-    cannot be brought to the others (see the module docstring). ``places``: each view's points'
-    places on the template (n, 3)."""
+MAX_LEFT_SHARE = 0.25  # of a session's area: views left out of the alignment beyond this, it is not read aligned
+
+
+@dataclass(frozen=True)
+class Joined:
+    """The views that came together, moved into the largest one's frame, and which they are
+    (indices into the views given, in that order)."""
+
+    views: list[View]
+    indices: list[int]
+
+
+def joined_views(views: list[View], places: list[np.ndarray]) -> Joined:
+    """The views that come together, moved into the largest one's frame (see the module
+    docstring); the largest always, the others as far as they join. ``places``: each view's
+    points' places on the template (n, 3)."""
     order = np.argsort([-float(view.mass.sum()) for view in views], kind="stable")
     own_normals = [_normals(view.points, cKDTree(view.points)) for view in views]  # turned with each view
     moved: dict[int, Motion] = {int(order[0]): Motion(np.eye(3), np.zeros(3))}
@@ -84,8 +97,18 @@ def aligned_views(views: list[View], places: list[np.ndarray]) -> list[View] | N
                 waiting.remove(candidate)
                 break
         else:  # none of the views left comes together with those joined
-            return None
-    return [View(moved[i](view.points), view.mass, view.boundary, view.edges) for i, view in enumerate(views)]
+            break
+    indices = sorted(moved)
+    return Joined(
+        [View(moved[i](views[i].points), views[i].mass, views[i].boundary, views[i].edges) for i in indices], indices
+    )
+
+
+def aligned_views(views: list[View], places: list[np.ndarray]) -> list[View] | None:
+    """The views moved into the largest one's frame, in the order given; None where one of them
+    cannot be brought to the others."""
+    joined = joined_views(views, places)
+    return joined.views if len(joined.indices) == len(views) else None
 
 
 def _motion(
@@ -102,12 +125,35 @@ def _motion(
     return motion if residual <= MAX_RESIDUAL * spacing else None
 
 
+@dataclass(frozen=True)
+class AlignedUnion:
+    """The first k eigenvalues of the views that came together, fused, and which views they are."""
+
+    eigenvalues: np.ndarray
+    joined: list[int]
+
+
 def aligned_spectrum(views: list[View], places: list[np.ndarray], k: int) -> np.ndarray | None:
     """The first ``k`` eigenvalues of views sent in their own frames, brought into one through
     their places and fused (:func:`app.sessions.fused.fused_spectrum`); None where they do not
-    come together."""
-    moved = aligned_views(views, places)
-    return None if moved is None else fused_spectrum(moved, k)
+    all come together."""
+    union = aligned_union(views, places, k, max_left_share=0.0)
+    return None if union is None else union.eigenvalues
+
+
+def aligned_union(
+    views: list[View], places: list[np.ndarray], k: int, max_left_share: float = MAX_LEFT_SHARE
+) -> AlignedUnion | None:
+    """The union of the views that come together, fused; None where those left out hold more
+    than ``max_left_share`` of the views' area (the caller chains those left onto it: a view or
+    two that do not come together, often a close-up, need not send the whole session through
+    the learned chain, which compounds)."""
+    joined = joined_views(views, places)
+    left = [i for i in range(len(views)) if i not in joined.indices]
+    area = [float(view.mass.sum()) for view in views]
+    if sum(area[i] for i in left) > max_left_share * sum(area):
+        return None
+    return AlignedUnion(fused_spectrum(joined.views, k), joined.indices)
 
 
 def _placed_pairs(union_places: cKDTree, places: np.ndarray) -> np.ndarray:

@@ -10,14 +10,16 @@ import anyio
 import numpy as np
 
 from app.inference.models import SpectralModels
+from app.sessions.aligned import AlignedUnion
 from app.sessions.fused import View
 from app.sessions.records import SessionMeta
 from app.sessions.session import SessionUnion, SessionView, session_union, union_by
 from app.sessions.store import SessionStore
 
 # (views, their places on the template or None for registered views, k) → the spectrum solved on
-# the views, or None where views in their own frames could not be aligned
-Solve = Callable[[list[View], list[np.ndarray] | None, int], Awaitable[np.ndarray | None]]
+# registered views; for views in their own frames the union of those that came together, or None
+# where too many were left out
+Solve = Callable[[list[View], list[np.ndarray] | None, int], Awaitable[np.ndarray | AlignedUnion | None]]
 
 
 @dataclass(frozen=True)
@@ -40,7 +42,8 @@ async def session_state(store: SessionStore, models: SpectralModels, session_id:
 
 
 async def _read_union(models: SpectralModels, views: list[SessionView], registered: bool, solve: Solve) -> SessionUnion:
-    """The union as :func:`union_by` reads it; views that cannot be aligned go through the chain."""
+    """The union as :func:`union_by` reads it; views too many of which cannot be aligned go
+    through the chain."""
     by, solved = union_by(len(views), registered, models.sessions), None
     if by in ("fused", "aligned"):
         places = None if by == "fused" else [view.places for view in views]

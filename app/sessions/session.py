@@ -11,14 +11,15 @@ views at once, never from the union answered before, so no prediction is fed bac
   (:mod:`app.sessions.calibration`);
 - views in their own frames: where the calibration found it closer for sessions of this many
   views, the views brought into one frame through their places on the template and fused
-  (:mod:`app.sessions.aligned`); otherwise, or where they do not come together (another pose),
-  the learned operator folded over the views' spectra, each step told what their places on the
-  template say (:mod:`app.sessions.chain`).
+  (:mod:`app.sessions.aligned`); where a few views, at most a quarter of the area, do not come
+  together, those chained onto the others' fused union by the learned operator; otherwise, or
+  where more do not (another pose), the learned operator folded over the views' spectra, each
+  step told what their places on the template say (:mod:`app.sessions.chain`).
 
 Coverage is read from the views' places in every case.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -27,11 +28,12 @@ from app.geometry.pipeline import Solved
 from app.inference.correspondence import PlacedPart
 from app.inference.cover import Cover, united
 from app.inference.models import SpectralModels, UnionEstimate
-from app.sessions.calibration import SessionCalibration
+from app.sessions.aligned import AlignedUnion
+from app.sessions.calibration import Bands, SessionCalibration
 from app.sessions.chain import Located, chained_union, template_fold
 from app.sessions.fused import View, view_of_part
 
-UnionBy = Literal["empty", "view", "fused", "aligned", "learned-chain"]
+UnionBy = Literal["empty", "view", "fused", "aligned", "aligned-and-chained", "learned-chain"]
 LEAST_COVERED = 3  # the body parts a session answers as least covered: what to scan next
 
 
@@ -73,25 +75,59 @@ def union_by(views: int, registered: bool, calibration: SessionCalibration | Non
 
 
 def session_union(
-    models: SpectralModels, views: list[SessionView], by: UnionBy, solved: np.ndarray | None = None
+    models: SpectralModels, views: list[SessionView], by: UnionBy, solved: np.ndarray | AlignedUnion | None = None
 ) -> SessionUnion:
     """The union of ``views`` read ``by`` (:func:`union_by`, or learned-chain where aligning
-    failed); ``solved``: for fused and aligned, the spectrum the caller solved on the views (in a
-    solver worker: :func:`app.sessions.fused.fused_spectrum`,
-    :func:`app.sessions.aligned.aligned_spectrum`)."""
+    failed); ``solved``: for fused, the spectrum the caller solved on the views, for aligned the
+    union of those that came together (in a solver worker: :func:`app.sessions.fused.
+    fused_spectrum`, :func:`app.sessions.aligned.aligned_union`)."""
     if by == "empty":
         return SessionUnion(UnionEstimate(np.zeros(0), np.zeros(0)), by)
     if by == "view":
         values = views[0].eigenvalues
         return SessionUnion(UnionEstimate(values, np.zeros_like(values)), by)
-    if by in ("fused", "aligned"):
-        if solved is None or models.sessions is None:
-            raise ValueError(f"a {by} union needs its spectrum and the sessions' calibration")
-        bands = models.sessions.fused if by == "fused" else models.sessions.aligned
-        return SessionUnion(UnionEstimate(solved, bands.sigma(solved, len(views))), by)
-    fold = template_fold(models, [view.located for view in views])
-    estimate = chained_union(models, [view.eigenvalues for view in views], fold)
-    told = fold.told or [None] * (len(views) - 1)
+    if by in ("fused", "aligned") and (solved is None or models.sessions is None):
+        raise ValueError(f"a {by} union needs its spectrum and the sessions' calibration")
+    if by == "fused":
+        return SessionUnion(UnionEstimate(solved, models.sessions.fused.sigma(solved, len(views))), by)
+    if by == "aligned" and len(solved.joined) == len(views):
+        values = solved.eigenvalues
+        return SessionUnion(UnionEstimate(values, models.sessions.aligned.sigma(values, len(views))), by)
+    if by == "aligned":
+        return _aligned_and_chained(models, views, solved)
+    return _chained(models, [view.eigenvalues for view in views], [view.located for view in views], by)
+
+
+def _aligned_and_chained(models: SpectralModels, views: list[SessionView], aligned: AlignedUnion) -> SessionUnion:
+    """:func:`chained_onto_aligned`, σ as :func:`aligned_and_chained_sigma` gives it."""
+    union = chained_onto_aligned(models, views, aligned)
+    estimate = union.estimate
+    sigma = aligned_and_chained_sigma(estimate, models.sessions.aligned, len(views))
+    return replace(union, estimate=UnionEstimate(estimate.eigenvalues, sigma, estimate.nested))
+
+
+def chained_onto_aligned(models: SpectralModels, views: list[SessionView], aligned: AlignedUnion) -> SessionUnion:
+    """The views that came together, fused, then the few left out chained onto that union by the
+    learned operator (its region the joined views' covers united): a step or two of the chain
+    instead of one per view; σ the chain's alone."""
+    left = [i for i in range(len(views)) if i not in set(aligned.joined)]
+    joined_cover = united([views[i].located.counted for i in aligned.joined])
+    located = [Located.carried(joined_cover, models.vertex_area)] + [views[i].located for i in left]
+    values = [aligned.eigenvalues] + [views[i].eigenvalues for i in left]
+    return _chained(models, values, located, "aligned-and-chained")
+
+
+def aligned_and_chained_sigma(chained: UnionEstimate, aligned: Bands, views: int) -> np.ndarray:
+    """σ of an aligned-and-chained union: the chain's steps' and an aligned union's of this many
+    views together (independent errors)."""
+    return np.hypot(chained.sigma, aligned.sigma(chained.eigenvalues, views))
+
+
+def _chained(models: SpectralModels, values: list[np.ndarray], located: list[Located], by: UnionBy) -> SessionUnion:
+    """The learned operator folded over ``values``, each step told what ``located`` says."""
+    fold = template_fold(models, located)
+    estimate = chained_union(models, values, fold)
+    told = fold.told or [None] * (len(values) - 1)
     steps = [share is not None or nested for share, nested in zip(told, estimate.nested, strict=True)]
     return SessionUnion(estimate, by, fold.overlaps, steps)
 

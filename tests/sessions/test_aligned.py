@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 from app.geometry.laplacian import mesh_operators
 from app.geometry.shapes import Mesh
 from app.geometry.topology import boundary_vertex_mask, drop_unreferenced
-from app.sessions.aligned import aligned_spectrum, aligned_views, rigid_fit
+from app.sessions.aligned import aligned_spectrum, aligned_union, aligned_views, rigid_fit
 from app.sessions.fused import View, fused_spectrum, view_of
 from tests.conftest import bumpy_patch
 
@@ -82,14 +82,33 @@ def test_the_aligned_union_is_the_registered_union():
 def test_views_of_two_poses_are_not_aligned():
     """The right view bent about the y axis (the surface in another pose): its overlap with the
     others cannot be brought onto theirs by any rigid motion."""
+    views, places = bent_third_view()  # bent from where it starts: rigid there, bent beyond
+    sent, _ = moved(views, seed=5)
+    assert aligned_views(sent, places) is None
+
+
+def bent_third_view() -> tuple[list[View], list[np.ndarray]]:
+    """The three views, the right one bent about the y axis (the surface in another pose)."""
     views, places = three_views()
     right = views[2]
     x, z = right.points[:, 0], right.points[:, 2]
-    angle = 1.2 * np.clip(x - 0.3, 0, None)  # bent from where it starts: rigid there, bent beyond
+    angle = 1.2 * np.clip(x - 0.3, 0, None)
     bent = np.column_stack([0.3 + (x - 0.3) * np.cos(angle) - z * np.sin(angle), right.points[:, 1], z])
     bent[:, 2] = (x - 0.3) * np.sin(angle) + z * np.cos(angle)
-    sent, _ = moved([*views[:2], View(bent, right.mass, right.boundary, right.edges)], seed=5)
-    assert aligned_views(sent, places) is None
+    return [*views[:2], View(bent, right.mass, right.boundary, right.edges)], places
+
+
+def test_the_views_that_come_together_are_fused_where_few_are_left_out():
+    """The bent view is left out: within the share of the area allowed the other two are fused
+    (their registered union) and named; with none allowed, nothing is answered."""
+    views, places = bent_third_view()
+    sent, _ = moved(views, seed=5)
+    share = views[2].mass.sum() / sum(view.mass.sum() for view in views)
+    union = aligned_union(sent, places, K, max_left_share=share + 0.01)
+    assert union is not None and union.joined == [0, 1]
+    np.testing.assert_allclose(union.eigenvalues, fused_spectrum(views[:2], K), rtol=5e-3)
+    assert aligned_union(sent, places, K, max_left_share=share - 0.01) is None
+    assert aligned_union(sent, places, K, max_left_share=0.0) is None
 
 
 def test_views_that_share_nothing_are_not_aligned():

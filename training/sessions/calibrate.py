@@ -65,8 +65,9 @@ def _held(estimates: list[np.ndarray], truths: list[np.ndarray], sigma: np.ndarr
 
 
 def _unregistered_error(read: Read) -> float:
-    """The error of an aligned reading as served: the chain's where the views did not align."""
-    return relative_error(read.chain if read.aligned is None else read.aligned, read.truth)
+    """The error of an aligned reading as served: aligned and chained where a few views did not
+    come together, the chain's where more did not."""
+    return relative_error(read.unregistered_aligned(), read.truth)
 
 
 def fit_bands(fit: list[Read], test: list[Read]) -> dict[str, list[dict]]:

@@ -59,7 +59,9 @@ def render(metrics: dict, command: str) -> str:
         "that order; views as cut / re-meshed; truth: the union of the views' regions solved by the service); mean "
         "relative error over λ₁…λ₂₀. Registered: the views fused and solved once. Unregistered: each view sent in "
         f"a random frame of its own, read as the calibration chose per band of views ({reading}; aligned: "
-        "brought into one frame through their places and fused, the chain where they did not align); beside them "
+        "brought into one frame through their places and fused; where views holding at most a quarter of the area "
+        "did not come together, those chained onto the others' union; the chain alone where more did not; aligned "
+        "share: the sessions read so); beside them "
         "the learned chain alone and the elementwise minimum. Interval held: the served union's 90 % interval "
         f"(held out of the calibration, fused {_bands(metrics, 'fused')}; aligned {_bands(metrics, 'aligned')}).",
         "",

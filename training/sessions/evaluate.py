@@ -14,6 +14,7 @@ import numpy as np
 from app.contract import INTERVAL_Z
 from app.inference.models import SpectralModels
 from app.sessions.calibration import SessionCalibration
+from app.sessions.session import aligned_and_chained_sigma
 from training.sessions.reading import Read, read_prefixes, session_views
 from training.sessions.scans import VARIANTS, relative_error, test_c_people
 
@@ -43,6 +44,9 @@ def _scores(calibration: SessionCalibration, read: Read) -> dict[str, float]:
     by = calibration.unregistered_by(read.views)
     if by == "aligned" and read.aligned is not None:
         unregistered, sigma = read.aligned, calibration.aligned.sigma(read.aligned, read.views)
+    elif by == "aligned" and read.partly is not None:
+        unregistered = read.partly.eigenvalues
+        sigma = aligned_and_chained_sigma(read.partly, calibration.aligned, read.views)
     else:
         unregistered, sigma = read.chain, read.chain_sigma
     fused_sigma = calibration.fused.sigma(read.fused, read.views)
@@ -53,7 +57,7 @@ def _scores(calibration: SessionCalibration, read: Read) -> dict[str, float]:
         "registered": relative_error(read.fused, read.truth),
         "unregistered_held": float(np.mean(np.abs(unregistered - read.truth) <= INTERVAL_Z * sigma)),
         "registered_held": float(np.mean(np.abs(read.fused - read.truth) <= INTERVAL_Z * fused_sigma)),
-        "aligned": float(by == "aligned" and read.aligned is not None),
+        "aligned": float(by == "aligned" and (read.aligned is not None or read.partly is not None)),
     }
 
 

@@ -12,17 +12,18 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from app.inference.models import SpectralModels
-from app.sessions.aligned import aligned_spectrum
+from app.inference.models import SpectralModels, UnionEstimate
+from app.sessions.aligned import AlignedUnion, aligned_union
 from app.sessions.fused import View, fused_spectrum
-from app.sessions.session import SessionView, session_union, session_view
+from app.sessions.session import SessionView, chained_onto_aligned, session_union, session_view
 from training.sessions.scans import K, Person, solved_view, union_spectrum, view_meshes
 
 
 @dataclass(frozen=True)
 class Read:
     """One session prefix: its length, the truth, and each reading's spectrum and σ (aligned:
-    None where the views did not come together)."""
+    None where the views did not all come together; partly: where a few did not, the others
+    aligned and those chained onto them, its σ the chain's alone, None otherwise)."""
 
     views: int
     truth: np.ndarray
@@ -31,6 +32,14 @@ class Read:
     chain_sigma: np.ndarray
     fused: np.ndarray
     aligned: np.ndarray | None
+    partly: UnionEstimate | None = None
+
+    def unregistered_aligned(self) -> np.ndarray:
+        """The spectrum an unregistered session read aligned is answered: aligned, else aligned
+        and chained, else the chain."""
+        if self.aligned is not None:
+            return self.aligned
+        return self.chain if self.partly is None else self.partly.eigenvalues
 
 
 def session_views(models: SpectralModels, person: Person, faces: np.ndarray, variant: str) -> list[SessionView]:
@@ -71,6 +80,7 @@ def read_prefixes(
             continue
         prefix = views[:length]
         chained = session_union(models, prefix, "learned-chain").estimate
+        aligned = aligned_union(frames[:length], [view.places for view in prefix], K)
         found.append(
             Read(
                 length,
@@ -79,7 +89,21 @@ def read_prefixes(
                 chained.eigenvalues,
                 chained.sigma,
                 fused_spectrum([view.geometry for view in prefix], K),
-                aligned_spectrum(frames[:length], [view.places for view in prefix], K),
+                aligned.eigenvalues if _whole(aligned, length) else None,
+                _partly(models, prefix, aligned),
             )
         )
     return found
+
+
+def _whole(aligned: AlignedUnion | None, views: int) -> bool:
+    """Whether every one of ``views`` views came together."""
+    return aligned is not None and len(aligned.joined) == views
+
+
+def _partly(models: SpectralModels, views: list[SessionView], aligned: AlignedUnion | None) -> UnionEstimate | None:
+    """Where some views did not come together (within the share left out the service allows):
+    the others fused, those chained onto them, as the service reads them."""
+    if aligned is None or _whole(aligned, len(views)):
+        return None
+    return chained_onto_aligned(models, views, aligned).estimate

@@ -87,14 +87,18 @@ class SessionResponse(UnionInterval):
         description="What made the union: empty (no view yet), view (one view: its own spectrum, σ 0), fused "
         "(registered views fused and solved once; σ calibrated on anny sessions by view count), aligned (views "
         "in their own frames brought into one through their places on the template, then fused; σ likewise), "
-        "learned-chain (the learned operator folded over the views' spectra in the order they landed, told the "
-        "overlaps their places say)."
+        "aligned-and-chained (aligned so, but a few views, at most a quarter of the session's area, did not come "
+        "together: chained onto the others' union by the learned operator; σ of both), learned-chain (the "
+        "learned operator folded over the views' spectra in the order they landed, told the overlaps their places "
+        "say)."
     )
     overlaps: list[float] = Field(
-        description="learned-chain: each union step's overlap read on the template, up to the first view whose "
-        "places are doubted (empty otherwise)."
+        description="learned-chain and aligned-and-chained: each union step's overlap read on the template, up to "
+        "the first operand whose places are doubted (empty otherwise)."
     )
-    overlaps_told: list[bool] = Field(description="learned-chain: per step, whether the operator was told it.")
+    overlaps_told: list[bool] = Field(
+        description="learned-chain and aligned-and-chained: per step, whether the operator was told it."
+    )
     area_fraction: float = Field(description="Share of the template's area the views cover together.")
     part_coverage: dict[str, float] = Field(description="Covered share of each body part's area.")
     least_covered: list[str] = Field(description="The body parts least covered, least first: what to scan next.")
