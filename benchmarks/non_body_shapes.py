@@ -142,7 +142,7 @@ def scanned(mesh: trimesh.Trimesh, kept: float, rng: np.random.Generator) -> tri
 def placed(models: SpectralModels, vertices: np.ndarray, faces: np.ndarray) -> PlacedPart:
     """A mesh solved and placed as an upload is."""
     data = trimesh.Trimesh(vertices, faces, process=False).export(file_type="ply")
-    solved = solve_bytes(data, "ply", SpectrumOptions(k=models.k), vectors=False, footprint=True, descriptors=True)
+    solved = solve_bytes(data, "ply", SpectrumOptions(k=models.k), vectors=False, descriptors=True)
     return models.correspondence.placed(solved.part)
 
 

@@ -146,7 +146,7 @@ async def union_of_operands(
     seconds = time.perf_counter() - started
     INFERENCE.labels("union").observe(seconds)
     warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]
-    warnings += _doubts(models, operands, placed)
+    warnings += _doubts(operands, placed)
     warnings += size_warnings(values, [o.source for o in operands])
     return UnionOutcome(
         operands,
@@ -186,7 +186,7 @@ def _uploads(operands: list[Operand]) -> list[Operand]:
     return [operand for operand in operands if operand.part is not None]
 
 
-def _doubts(models: SpectralModels, operands: list[Operand], placed: list[PlacedPart]) -> list[str]:
+def _doubts(operands: list[Operand], placed: list[PlacedPart]) -> list[str]:
     """A warning for each placed upload whose places cannot be trusted (left out of its region)."""
     if not placed:
         return []

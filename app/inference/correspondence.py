@@ -244,9 +244,10 @@ class CorrespondenceModel:
         self.nested_below = self.graph.nested_below
         self.uncertain_below = self.graph.uncertain_below
 
-    def place(self, part: Part) -> Placement:
-        """Each vertex of a part (app.geometry.placing) on the template."""
-        return self.placement(part, self.graph.run(part))
+    def place(self, part: Part, places: Places | None = None) -> Placement:
+        """Each vertex of a part (app.geometry.placing) on the template: by ``places`` a worker
+        computed, else by the graph run here."""
+        return self.placement(part, self.graph.run(part) if places is None else places)
 
     def placement(self, part: Part, places: Places) -> Placement:
         """A part's places on its own vertices, with each one's nearest template vertex."""
@@ -282,6 +283,6 @@ class CorrespondenceModel:
 
     def placed(self, part: Part, places: Places | None = None) -> PlacedPart:
         """The part placed (by ``places`` a worker computed, else here) and what it covers."""
-        placement = self.place(part) if places is None else self.placement(part, places)
+        placement = self.place(part, places)
         cover = self.cover(placement)
         return PlacedPart(placement, cover, tuple(self.doubts(placement, cover)))

@@ -133,6 +133,11 @@ class AlignedUnion:
     joined: list[int]
 
 
+def left_out(joined: list[int], views: int) -> list[int]:
+    """The indices of ``views`` views not among ``joined``, in order."""
+    return sorted(set(range(views)) - set(joined))
+
+
 def aligned_spectrum(views: list[View], places: list[np.ndarray], k: int) -> np.ndarray | None:
     """The first ``k`` eigenvalues of views sent in their own frames, brought into one through
     their places and fused (:func:`app.sessions.fused.fused_spectrum`); None where they do not
@@ -149,7 +154,7 @@ def aligned_union(
     two that do not come together, often a close-up, need not send the whole session through
     the learned chain, which compounds)."""
     joined = joined_views(views, places)
-    left = [i for i in range(len(views)) if i not in joined.indices]
+    left = left_out(joined.indices, len(views))
     area = [float(view.mass.sum()) for view in views]
     if sum(area[i] for i in left) > max_left_share * sum(area):
         return None

@@ -102,7 +102,7 @@ def stored_body(
     ``places`` a worker computed, else here) keeps for identity: the shape fitted to it (in the
     pose it was scanned in, which leaks into the shape: ``basis.posed_spread``), or None where no
     body fits it (not a person, too little of one)."""
-    placed = correspondence.placed(part, places).placement.position
+    placed = correspondence.place(part, places).position  # no region: the fit reads the places alone
     try:
         fitted = fitted_views(basis, template, [view_of_part(part)], [placed], registered=True)
     except (NotEnoughSeen, NoBodyFits):

@@ -28,7 +28,7 @@ from app.geometry.pipeline import Solved
 from app.inference.correspondence import PlacedPart
 from app.inference.cover import Cover, united
 from app.inference.models import SpectralModels, UnionEstimate
-from app.sessions.aligned import AlignedUnion
+from app.sessions.aligned import AlignedUnion, left_out
 from app.sessions.calibration import Bands, SessionCalibration
 from app.sessions.chain import Located, chained_union, template_fold
 from app.sessions.fused import View, view_of_part
@@ -110,7 +110,7 @@ def chained_onto_aligned(models: SpectralModels, views: list[SessionView], align
     """The views that came together, fused, then the few left out chained onto that union by the
     learned operator (its region the joined views' covers united): a step or two of the chain
     instead of one per view; σ the chain's alone."""
-    left = [i for i in range(len(views)) if i not in set(aligned.joined)]
+    left = left_out(aligned.joined, len(views))
     joined_cover = united([views[i].located.counted for i in aligned.joined])
     located = [Located.carried(joined_cover, models.vertex_area)] + [views[i].located for i in left]
     values = [aligned.eigenvalues] + [views[i].eigenvalues for i in left]
