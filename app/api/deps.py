@@ -9,7 +9,7 @@ from typing import Annotated
 from fastapi import Depends, Header, Request
 
 from app.api.operands import Told, told_query
-from app.api.problems import ProblemError
+from app.api.problems import ProblemError, form_items
 from app.core.config import Settings
 from app.inference.models import SpectralModels
 from app.inference.region_tokens import RegionTokens
@@ -77,13 +77,9 @@ WriteKeyDep = Depends(require_write_key)
 
 async def refuse_repeated_parameters(request: Request) -> None:
     """422 for a query parameter or form field given twice: ``k=500&k=5`` was answered for k = 5,
-    silently, and two ``spectra`` fields for the second. FastAPI has already read the form by
-    the time dependencies run, so ``request.form()`` is its cached parse, not a second one."""
+    silently, and two ``spectra`` fields for the second."""
     _refuse(request.query_params.multi_items(), "query parameter")
-    media_type = request.headers.get("content-type", "").split(";")[0].strip().lower()  # as Starlette reads it
-    if media_type in ("multipart/form-data", "application/x-www-form-urlencoded"):
-        fields = [(key, value) for key, value in (await request.form()).multi_items() if key not in REPEATABLE_FIELDS]
-        _refuse(fields, "form field")
+    _refuse([(key, value) for key, value in await form_items(request) if key not in REPEATABLE_FIELDS], "form field")
 
 
 def _refuse(items: Iterable[tuple[str, object]], what: str) -> None:

@@ -212,17 +212,23 @@ def _allowed_methods(request: Request) -> list[str]:
     return sorted(methods)
 
 
-async def _sent_fields(request: Request) -> list[str]:
-    """The names of the form fields a request sent (its form was parsed already, and is read
-    from the cache; none for a request that is no form)."""
-    kind = request.headers.get("content-type", "")
-    if not kind.startswith(("multipart/form-data", "application/x-www-form-urlencoded")):
+async def form_items(request: Request) -> list[tuple[str, object]]:
+    """A request's form fields, (name, value) as sent, repeats included; none for a request that
+    is no form. FastAPI has read the form before dependencies and handlers run, so this is its
+    cached parse, not a second one."""
+    media_type = request.headers.get("content-type", "").split(";")[0].strip().lower()  # as Starlette reads it
+    if media_type not in ("multipart/form-data", "application/x-www-form-urlencoded"):
         return []
+    return list((await request.form()).multi_items())
+
+
+async def _sent_fields(request: Request) -> list[str]:
+    """The names of the form fields a request sent, quoted."""
     try:
-        form = await request.form()
+        items = await form_items(request)
     except Exception:  # a form that cannot be parsed was answered 400 before validation
         return []
-    return sorted({f"'{name}'" for name in form.keys()})
+    return sorted({f"'{name}'" for name, _ in items})
 
 
 def install_problem_handlers(app: FastAPI) -> None:
