@@ -30,7 +30,7 @@ from app.geometry.shapes import Mesh
 from app.inference.correspondence import CorrespondenceModel
 from app.inference.models import SpectralModels
 from app.samples import PARTS, template_part_mesh
-from training.timing import interleaved_ms
+from training.common.timing import interleaved_ms
 
 CONTROLLER = ThreadpoolController()
 

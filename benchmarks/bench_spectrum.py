@@ -37,7 +37,7 @@ from app.geometry.pencil import ShiftedPencil
 from app.geometry.shapes import Mesh
 from app.geometry.spectrum import eigenpairs, eigenvalues, shift_for
 from app.geometry.topology import boundary_vertex_mask, drop_unreferenced, largest_component
-from training.timing import interleaved_ms
+from training.common.timing import interleaved_ms
 
 
 def anny_body() -> Mesh:

@@ -3,7 +3,7 @@
     python benchmarks/bench_union_laws.py [MODELS_DIR]
 
 Mean and worst relative error per law over fresh parts of the template body
-(:mod:`training.learning.laws`); the tolerances of ``tests/inference/test_union_laws.py`` and the
+(:mod:`training.union.laws`); the tolerances of ``tests/inference/test_union_laws.py`` and the
 model card's law table come from here.
 """
 
@@ -15,7 +15,7 @@ import numpy as np
 from app.inference.models import SpectralModels
 from training.data.regions import RegionSampler
 from training.data.template import Template
-from training.learning.laws import law_parts, measure_laws
+from training.union.laws import law_parts, measure_laws
 
 MODELS = Path(__file__).resolve().parents[1] / "models"
 

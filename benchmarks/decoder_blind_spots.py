@@ -18,7 +18,7 @@ import numpy as np
 
 from app.inference.models import SpectralModels
 from benchmarks.arguments import benchmark_parser
-from training.learning.data import SpectralData
+from training.common.data import SpectralData
 from training.reconstruction.blind_spots import (
     above_soles,
     away_from,

@@ -31,10 +31,10 @@ from app.geometry.overlap import (
 )
 from app.geometry.topology import boundary_vertex_mask
 from benchmarks.arguments import benchmark_parser
+from training.common.data import SpectralData
+from training.common.spectral_errors import spectral_errors
 from training.data.spectra import MESH, REMESHED, region_mesh, remeshed
-from training.learning.data import SpectralData
-from training.learning.predictors import served_predictors, served_told_predictor
-from training.learning.spectral_errors import spectral_errors
+from training.union.predictors import served_predictors, served_told_predictor
 
 
 def footprint(vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray, variant: str, points: int) -> Footprint:

@@ -27,11 +27,9 @@ from app.contract import PROFILE_SHARES
 from app.inference.body import open_surface
 from app.inference.models import SpectralModels
 from benchmarks.arguments import benchmark_parser
+from training.common.data import SpectralData
 from training.data.pairs import PARTIAL_UNION
 from training.data.spectra import MESH
-from training.learning.data import SpectralData
-from training.learning.predictors import served_predictors
-from training.learning.shapedna import TOP, full_coverage_pairs, hit_rates, stored_bodies
 from training.reconstruction.blind_spots import blind_spot_masks, scans_of_shapes
 from training.reconstruction.evaluate import (
     BLIND_SPOT_SEED,
@@ -40,6 +38,8 @@ from training.reconstruction.evaluate import (
     identity_groups,
     rebuilt_spectra,
 )
+from training.union.predictors import served_predictors
+from training.union.shapedna import TOP, full_coverage_pairs, hit_rates, stored_bodies
 
 PARTIAL_ROWS = 150  # Test A partial unions scored: enough for a rate to ±4 points
 EVERY = 3  # every third stored shape scanned with blind spots

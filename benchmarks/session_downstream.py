@@ -23,12 +23,12 @@ from app.inference.body import open_surface
 from app.inference.models import SpectralModels, chained_sigma
 from app.inference.template import localized_region
 from benchmarks.arguments import benchmark_parser
-from training.learning.data import SpectralData
-from training.learning.masks import SERVED_LOCALIZER, symmetric_scores
-from training.learning.predictors import served_predictors, served_told_predictor
-from training.learning.shapedna import hit_rates, stored_bodies
+from training.common.data import SpectralData
+from training.localizer.masks import SERVED_LOCALIZER, symmetric_scores
 from training.reconstruction.evaluate import body_scores, closed_spectra
 from training.reconstruction.train import data_set_rest_bodies
+from training.union.predictors import served_predictors, served_told_predictor
+from training.union.shapedna import hit_rates, stored_bodies
 
 TRUE_UNION = "the true union's spectrum"  # one operand: the five views uploaded merged
 

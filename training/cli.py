@@ -64,7 +64,7 @@ def build_bodies_command(
 DataOption = Annotated[Path, typer.Option(help="A built data set directory.")]
 ModelsOption = Annotated[Path, typer.Option(help="Where the ONNX models, metrics and card go.")]
 PresetOption = Annotated[
-    str, typer.Option(help="Training preset: tiny, standard, or a comparison standard-* (training.learning.pipeline).")
+    str, typer.Option(help="Training preset: tiny, standard, or a comparison standard-* (training.union.pipeline).")
 ]
 
 
@@ -103,9 +103,9 @@ def score_command(
     ``evaluate`` (localization by the served localizer only), e.g. an earlier model on new rows."""
     import json
 
-    from training.learning.data import SpectralData
-    from training.learning.evaluate import evaluate
-    from training.learning.predictors import served_predictors, served_told_predictor
+    from training.common.data import SpectralData
+    from training.union.evaluate import evaluate
+    from training.union.predictors import served_predictors, served_told_predictor
 
     metrics = evaluate(SpectralData(data, seed=seed), *served_predictors(models), served_told_predictor(models))
     out.write_text(json.dumps(metrics, indent=1))
@@ -120,7 +120,7 @@ def compare_command(
     """Print every table of the card before → after, as Markdown (for the card's prose)."""
     import json
 
-    from training.learning.compare import comparison
+    from training.card.compare import comparison
 
     typer.echo(comparison(json.loads(before.read_text()), json.loads(after.read_text())), nl=False)
 
@@ -232,7 +232,7 @@ def fit_bodies_command(
 
 
 def _pipeline(verb: str, data: Path, runs: Path, models: Path, preset: str, seed: int) -> None:
-    from training.learning.pipeline import TRAINING_PRESETS, UnfinishedRuns, run_pipeline
+    from training.union.pipeline import TRAINING_PRESETS, UnfinishedRuns, run_pipeline
 
     if preset not in TRAINING_PRESETS:
         raise typer.BadParameter(f"unknown preset {preset!r}")

@@ -1,6 +1,6 @@
 """The laws of union, as properties of the served ONNX operator (``models/union.onnx``).
 
-Fresh parts of the shipped template body (:mod:`training.learning.laws`), through the service's
+Fresh parts of the shipped template body (:mod:`training.union.laws`), through the service's
 own model class. Tolerances are the committed model's measured figures (``python
 benchmarks/bench_union_laws.py``) with a margin for other CPUs' rounding, never loosened to pass;
 each docstring says what was measured.
@@ -14,7 +14,7 @@ import pytest
 from app.inference.models import SpectralModels
 from training.data.regions import RegionSampler
 from training.data.template import Template
-from training.learning.laws import law_parts, measure_laws
+from training.union.laws import law_parts, measure_laws
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 # Measured on the committed models (`python benchmarks/bench_union_laws.py`, its table in

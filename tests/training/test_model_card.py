@@ -5,10 +5,10 @@ import copy
 import json
 from pathlib import Path
 
-from training.correspondence import card as correspondence_card
-from training.glance import BEGIN as GLANCE_BEGIN
-from training.glance import END as GLANCE_END
-from training.glance import (
+from training.card import correspondence as correspondence_card
+from training.card.glance import BEGIN as GLANCE_BEGIN
+from training.card.glance import END as GLANCE_END
+from training.card.glance import (
     part_coverage_row,
     placing_cost_row,
     render_glance,
@@ -16,7 +16,7 @@ from training.glance import (
     session_pair_row,
     unseen_types_row,
 )
-from training.learning.card import BEGIN, END, EVALUATION, render, render_summary
+from training.card.tables import BEGIN, END, EVALUATION, render, render_summary
 from training.sessions import card as sessions_card
 
 MODELS = Path(__file__).resolve().parents[2] / "models"

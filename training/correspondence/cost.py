@@ -20,7 +20,7 @@ from app.geometry.placing import mesh_part
 from app.inference.correspondence import CorrespondenceModel
 from app.inference.models import SpectralModels
 from app.samples import PARTS, template_part_mesh
-from training.timing import interleaved_ms
+from training.common.timing import interleaved_ms
 
 COST_PART = "no_left_forearm_hand.ply"
 COST_THREADS = 1  # BLAS's and the graph's, as in a solver worker (app.api.solver)

@@ -39,14 +39,14 @@ from app.inference.cover import Cover
 from app.inference.models import SpectralModels
 from app.inference.nesting import NESTED_OVERLAP, Nesting, inner_confidence
 from app.inference.template import Template
+from training.common.spectral_errors import spectral_errors
 from training.correspondence.pairs import PAIR_SETS, VALIDATION_SETS, load_pairs
 from training.correspondence.parts import VARIANTS
 from training.correspondence.train import load_parts
 from training.data.pairs import overlap_strata
 from training.data.spectra import task_spectrum
-from training.learning.baselines import elementwise_min
-from training.learning.masks import present_part_coverage, symmetric_scores
-from training.learning.spectral_errors import spectral_errors
+from training.localizer.masks import present_part_coverage, symmetric_scores
+from training.union.baselines import elementwise_min
 
 TEST_SETS = ("test_a", "test_b", "test_c")
 
@@ -73,7 +73,7 @@ class PartScore:
 
 def region_scores(predicted: np.ndarray, truth: np.ndarray, template: Template, area: np.ndarray) -> tuple:
     """(m, n) predicted template masks against one true mask (n,): the project's mask scores
-    (:func:`training.learning.masks.symmetric_scores`) taken as they are (plain: which side the
+    (:func:`training.localizer.masks.symmetric_scores`) taken as they are (plain: which side the
     part lies on counts) and mirror-allowed."""
     targets = np.repeat(truth[None], len(predicted), axis=0)
     plain = symmetric_scores(predicted, targets, area, np.arange(len(truth)), template.labels)

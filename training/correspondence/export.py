@@ -12,8 +12,8 @@ import numpy as np
 import torch
 
 from app.contract import CORRESPONDENCE_INPUTS, CORRESPONDENCE_OUTPUTS
+from training.common.onnx_export import export_graph, relative_difference, session
 from training.correspondence.net import CorrespondenceNet, stencil_matrices
-from training.onnx_export import export_graph, relative_difference, session
 
 
 def export_correspondence(model: CorrespondenceNet, example: dict[str, np.ndarray], path: Path) -> None:

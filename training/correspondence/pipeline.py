@@ -15,13 +15,13 @@ from app.contract import CORRESPONDENCE_FILE
 from app.inference.correspondence import TELL_BELOW_KEY, UNCERTAIN_BELOW_KEY
 from app.inference.manifest import write_manifest
 from app.inference.nesting import NESTED_BELOW_KEY
-from training.correspondence.card import BEGIN, END, render
+from training.card.correspondence import BEGIN, END, render
+from training.card.glance import update_glance
+from training.card.tables import replace_block
 from training.correspondence.cost import part_cost
 from training.correspondence.evaluate import evaluate_correspondence, evaluate_pairs
 from training.correspondence.export import correspondence_parity, export_correspondence
 from training.correspondence.train import TRAINING_PRESETS, load_parts, restored, train
-from training.glance import update_glance
-from training.learning.card import replace_block
 
 METRICS_FILE = "correspondence.json"
 

@@ -16,9 +16,9 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from training.common.data import SpectralData
 from training.data.spectra import MESH, task_spectrum
 from training.data.workers import mapped
-from training.learning.data import SpectralData
 
 SOLE_HEIGHT = (0.005, 0.03)  # m above the lowest vertex: the soles and the floor's shadow
 HEAD_RADIUS = (0.02, 0.06)  # m around the top of the head

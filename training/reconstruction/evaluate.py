@@ -28,8 +28,8 @@ from app.geometry.shapes import Mesh
 from app.inference.body import body_height, spectrum_gap, surface_area
 from app.inference.models import SpectralModels, chained_sigma
 from app.retrieval.distance import features
+from training.common.data import SpectralData
 from training.data.spectra import MESH
-from training.learning.data import SpectralData
 from training.reconstruction.blind_spots import blind_spot_spectra
 
 UNKNOWN_GROUPS = ("unknown_man", "unknown_woman", "child")

@@ -1,5 +1,5 @@
 """ONNX export of the shape decoder, its parity, and its shape basis read back from the graph
-(the export machinery: :mod:`training.onnx_export`)."""
+(the export machinery: :mod:`training.common.onnx_export`)."""
 
 from pathlib import Path
 
@@ -9,7 +9,7 @@ import torch
 from onnx import numpy_helper
 
 from app.contract import RECONSTRUCTION_INPUTS, RECONSTRUCTION_OUTPUTS
-from training.onnx_export import export_graph, graph_parity
+from training.common.onnx_export import export_graph, graph_parity
 from training.reconstruction.decoder import SpectrumDecoder
 
 

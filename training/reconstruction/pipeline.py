@@ -15,15 +15,15 @@ import torch
 
 from app.contract import RECONSTRUCTION_FILE
 from app.inference.manifest import write_manifest
-from training.glance import update_glance
-from training.learning.card import replace_block
-from training.learning.data import SpectralData
-from training.learning.predictors import served_predictors
+from training.card.glance import update_glance
+from training.card.tables import replace_block
+from training.common.data import SpectralData
 from training.reconstruction.bodies import BODIES_FILE
 from training.reconstruction.decoder import DecoderConfig, ShapeBasis
 from training.reconstruction.evaluate import evaluate_decoder
 from training.reconstruction.export import decoder_parity, export_decoder
 from training.reconstruction.train import DecoderTraining, data_set_rest_bodies, split_bodies, train_decoder
+from training.union.predictors import served_predictors
 
 METRICS_FILE = "reconstruction.json"
 BEGIN, END = "<!-- reconstruction:begin -->", "<!-- reconstruction:end -->"

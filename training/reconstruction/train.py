@@ -20,12 +20,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from training.common.data import SpectralData
+from training.common.fit import LoopSettings, Objective, fit, seed_everything
 from training.data.spectra import MESH
-from training.learning.data import SpectralData
-from training.learning.fit import LoopSettings, Objective, fit, seed_everything
-from training.learning.train_union import load_operator
-from training.learning.union_net import UnionOperator
-from training.learning.union_predict import memory_rows, predict
 from training.reconstruction.bodies import BODIES_FILE
 from training.reconstruction.decoder import (
     DecoderConfig,
@@ -35,6 +32,9 @@ from training.reconstruction.decoder import (
     spectral_features,
 )
 from training.reconstruction.unions import PARTIAL_COVERAGE, SCANS_FILE, UNIONS_FILE
+from training.union.net import UnionOperator
+from training.union.predict import memory_rows, predict
+from training.union.train import load_operator
 
 HELD_OUT = 0.1  # of the bodies build's identities, for validation
 Rows = tuple[np.ndarray, np.ndarray]  # (spectra (n, k), index into the bodies (n,))

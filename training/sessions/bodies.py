@@ -27,8 +27,8 @@ from app.sessions.body import NoBodyFits, SessionBody, session_body, stored_body
 from app.sessions.fused import fused_spectrum
 from app.sessions.identity import Candidate, ranked_rows, unknown_warning
 from app.sessions.session import SessionView, session_coverage, session_union
-from training.glance import CARD, update_glance
-from training.learning.card import replace_block
+from training.card.glance import CARD, update_glance
+from training.card.tables import replace_block
 from training.reconstruction.evaluate import closed_spectrum, rigidly_aligned
 from training.reconstruction.export import decoder_basis
 from training.sessions.body_card import BEGIN, END, render

@@ -2,7 +2,7 @@
 scanning session's views and its measurements, on Test C's people, beside the mean body, and the
 goals."""
 
-from training.learning.card import percent
+from training.card.tables import percent
 
 BEGIN, END = "<!-- bodies:begin -->", "<!-- bodies:end -->"
 GOAL_BODY_MM = 15.0  # the body from a 5-view session, mean vertex error

@@ -23,8 +23,8 @@ from app.contract import INTERVAL_Z, SESSIONS_FILE
 from app.inference.manifest import write_manifest
 from app.inference.models import SpectralModels
 from app.sessions.calibration import Bands, SessionCalibration
-from training.glance import CARD, update_glance
-from training.learning.card import replace_block
+from training.card.glance import CARD, update_glance
+from training.card.tables import replace_block
 from training.sessions.card import BEGIN, END, render
 from training.sessions.evaluate import evaluate_sessions
 from training.sessions.reading import Read, read_prefixes, session_views

@@ -2,7 +2,7 @@
 session's union as ``/v1/sessions`` answers it on Test C's people, beside the learned chain and
 the elementwise minimum, and the goals."""
 
-from training.learning.card import percent
+from training.card.tables import percent
 
 BEGIN, END = "<!-- sessions:begin -->", "<!-- sessions:end -->"
 GOAL_ANY, GOAL_REGISTERED, GOAL_DRIFT = 0.06, 0.03, 0.01  # every length; registered; 24 views over 3

@@ -26,7 +26,7 @@ from app.inference.manifest import verify_manifest  # noqa: E402
 from app.inference.models import SpectralModels  # noqa: E402
 from app.inference.nesting import NESTED_BELOW_KEY  # noqa: E402
 from app.samples import PARTS, template_part_mesh  # noqa: E402
-from training.correspondence.card import BEGIN, END, render  # noqa: E402
+from training.card.correspondence import BEGIN, END, render  # noqa: E402
 from training.correspondence.evaluate import NESTED_THRESHOLDS, TELL_THRESHOLDS  # noqa: E402
 from training.correspondence.pairs import PAIR_SETS, build_pairs  # noqa: E402
 from training.correspondence.parts import PARTS_PRESETS, build_parts  # noqa: E402

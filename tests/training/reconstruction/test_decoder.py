@@ -7,7 +7,7 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("onnxscript")
 
 from app.contract import RECONSTRUCTION_INPUTS  # noqa: E402
-from training.onnx_export import session  # noqa: E402
+from training.common.onnx_export import session  # noqa: E402
 from training.reconstruction.decoder import (  # noqa: E402
     DecoderConfig,
     ShapeBasis,

@@ -16,20 +16,20 @@ from app.contract import (
 )
 from app.inference.models import chained_sigma
 from app.inference.template import localized_region
+from training.common.data import PairTable, SpectralData
+from training.common.spectral_errors import spectral_errors
 from training.data.overlaps import CAMERA
 from training.data.pairs import FULL_COVERAGE, PARTIAL_UNION, STRATA, overlap_strata
 from training.data.spectra import CLOUD, MESH, REMESHED, task_spectrum
-from training.learning.baselines import UnionLookup, disjoint_union, elementwise_min, larger_part
-from training.learning.data import PairTable, SpectralData
-from training.learning.masks import (
+from training.localizer.masks import (
     PARTS_UNITED,
     SERVED_LOCALIZER,
     UNION_WITH_PARTS,
     symmetric_scores,
     united_by_mirror_rule,
 )
-from training.learning.predictors import RegionPredictor, ToldPredictor, UnionPredictor
-from training.learning.spectral_errors import spectral_errors
+from training.union.baselines import UnionLookup, disjoint_union, elementwise_min, larger_part
+from training.union.predictors import RegionPredictor, ToldPredictor, UnionPredictor
 
 GROUPS = ("known_man", "unknown_man", "unknown_woman", "known_woman", "child")
 SPLITS = ("test_a", "test_b")

@@ -16,12 +16,12 @@ import torch
 
 from app.geometry.laplacian import mesh_operators
 from app.geometry.spectrum import eigenpairs
-from training.learning.data import PairTable, SpectralData
-from training.learning.fit import LoopSettings, Objective, fit, pick_device, seed_everything
-from training.learning.localizer_net import Localizer, LocalizerConfig, feature_statistics
-from training.learning.masks import symmetric_scores
-from training.learning.union_net import UnionOperator
-from training.learning.union_predict import memory_rows, predict
+from training.common.data import PairTable, SpectralData
+from training.common.fit import LoopSettings, Objective, fit, pick_device, seed_everything
+from training.localizer.masks import symmetric_scores
+from training.localizer.net import Localizer, LocalizerConfig, feature_statistics
+from training.union.net import UnionOperator
+from training.union.predict import memory_rows, predict
 
 
 @dataclass(frozen=True)

@@ -36,9 +36,9 @@ import torch
 from torch import Tensor, nn
 
 from app.contract import UNKNOWN_OVERLAP
-from training.learning.corrections import CORRECTIONS, ToldCorrection
-from training.learning.union_config import MONOTONE, UnionConfig
-from training.learning.union_memory import EPSILON, UnionMemory, common_scale, disjoint_union, relative_log
+from training.union.config import MONOTONE, UnionConfig
+from training.union.corrections import CORRECTIONS, ToldCorrection
+from training.union.memory import EPSILON, UnionMemory, common_scale, disjoint_union, relative_log
 
 SIGMA_FLOOR = 1e-2  # the smallest relative σ before calibration (the pose noise floor is ~2 %)
 SHARPNESS = 20.0  # of the softplus that turns the monotone parametrization's signal into a decrease

@@ -17,15 +17,15 @@ pytest.importorskip("onnxscript")
 from app.contract import UNKNOWN_BOUNDARY, UNKNOWN_OVERLAP, union_feeds  # noqa: E402
 from app.inference.models import graph_inputs  # noqa: E402
 from tests.training.data.synthetic import SyntheticSource  # noqa: E402
+from training.common.data import SpectralData  # noqa: E402
 from training.data.build import build_dataset  # noqa: E402
 from training.data.presets import PRESETS  # noqa: E402
-from training.learning import train_union as union_training  # noqa: E402
-from training.learning.data import SpectralData  # noqa: E402
-from training.learning.export import session  # noqa: E402
-from training.learning.pipeline import TRAINING_PRESETS, run_pipeline  # noqa: E402
-from training.learning.train_union import SIZE_BINS, size_weights, train_union, union_kin  # noqa: E402
-from training.learning.union_predict import memory_rows  # noqa: E402
 from training.reconstruction.train import partial_rows  # noqa: E402
+from training.union import train as union_training  # noqa: E402
+from training.union.export import session  # noqa: E402
+from training.union.pipeline import TRAINING_PRESETS, run_pipeline  # noqa: E402
+from training.union.predict import memory_rows  # noqa: E402
+from training.union.train import SIZE_BINS, size_weights, train_union, union_kin  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -17,22 +17,22 @@ import numpy as np
 from app.contract import LOCALIZER_FILE, PROFILE_SHARES, UNION_FILE, UNKNOWN_BOUNDARY
 from app.inference.manifest import write_manifest
 from app.retrieval.seed import SEED_FILE
-from training.glance import update_glance
-from training.learning.baselines import elementwise_min, larger_part
-from training.learning.card import update_card
-from training.learning.data import SpectralData
-from training.learning.evaluate import evaluate
-from training.learning.export import export_localizer, export_union, localizer_parity, union_parity
-from training.learning.fit import is_finished, validation_history
-from training.learning.localizer_net import Localizer, LocalizerConfig
-from training.learning.masks import SERVED_LOCALIZER
-from training.learning.predictors import told_predictor, trained_predictors
-from training.learning.shapedna import complete_shapes, full_coverage_pairs, retrieval_table, save_seed
-from training.learning.train_localizer import LocalizerTraining, train_localizer
-from training.learning.train_union import UnionTraining, train_union
-from training.learning.union_config import PRIOR, UnionConfig
-from training.learning.union_predict import predict
-from training.learning.union_sigma import FLOOR_GRID
+from training.card.glance import update_glance
+from training.card.tables import update_card
+from training.common.data import SpectralData
+from training.common.fit import is_finished, validation_history
+from training.localizer.masks import SERVED_LOCALIZER
+from training.localizer.net import Localizer, LocalizerConfig
+from training.localizer.train import LocalizerTraining, train_localizer
+from training.union.baselines import elementwise_min, larger_part
+from training.union.config import PRIOR, UnionConfig
+from training.union.evaluate import evaluate
+from training.union.export import export_localizer, export_union, localizer_parity, union_parity
+from training.union.predict import predict
+from training.union.predictors import told_predictor, trained_predictors
+from training.union.shapedna import complete_shapes, full_coverage_pairs, retrieval_table, save_seed
+from training.union.sigma import FLOOR_GRID
+from training.union.train import UnionTraining, train_union
 
 
 @dataclass(frozen=True)

@@ -5,8 +5,8 @@ The card shows every existing table before and after a model change; this writes
 two files instead of by hand, so that no cell is copied wrong and no row is left out.
 """
 
-from training.learning.card import BASELINES, percent
-from training.learning.masks import SERVED_LOCALIZER
+from training.card.tables import BASELINES, percent
+from training.localizer.masks import SERVED_LOCALIZER
 
 
 def _mre(row: dict, method: str = "operator") -> float:

@@ -1,5 +1,5 @@
 """ONNX export of the union operator and the localizer, with the parity checks the service
-relies on (the export machinery: :mod:`training.onnx_export`). Both graphs have a dynamic batch
+relies on (the export machinery: :mod:`training.common.onnx_export`). Both graphs have a dynamic batch
 dimension."""
 
 from pathlib import Path
@@ -19,9 +19,9 @@ from app.contract import (
     union_feeds,
 )
 from app.inference.models import graph_inputs
-from training.learning.localizer_net import Localizer
-from training.learning.union_net import UnionOperator
-from training.onnx_export import export_graph, graph_parity, relative_difference, session
+from training.common.onnx_export import export_graph, graph_parity, relative_difference, session
+from training.localizer.net import Localizer
+from training.union.net import UnionOperator
 
 
 class _WithOverlap(torch.nn.Module):

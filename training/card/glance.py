@@ -11,8 +11,8 @@ import json
 from collections.abc import Callable
 from pathlib import Path
 
-from training.correspondence.card import PLACING_GOAL_MS, worst_served_gap
-from training.learning.card import percent, replace_block
+from training.card.correspondence import PLACING_GOAL_MS, worst_served_gap
+from training.card.tables import percent, replace_block
 from training.sessions import body_card
 from training.sessions import card as sessions_card
 

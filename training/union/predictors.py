@@ -11,11 +11,11 @@ import onnxruntime as ort
 
 from app.contract import LOCALIZER_FILE, LOCALIZER_INPUTS, UNION_FILE, union_feeds
 from app.inference.models import graph_inputs, reads_boundary, reads_overlap
-from training.learning.localizer_net import Localizer
-from training.learning.masks import SERVED_LOCALIZER
-from training.learning.train_localizer import probabilities
-from training.learning.union_net import UnionOperator
-from training.learning.union_predict import predict
+from training.localizer.masks import SERVED_LOCALIZER
+from training.localizer.net import Localizer
+from training.localizer.train import probabilities
+from training.union.net import UnionOperator
+from training.union.predict import predict
 
 UnionPredictor = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]  # (a, b) → (union, σ)
 
@@ -58,7 +58,7 @@ def told_predictor(union: UnionOperator) -> ToldPredictor | None:
 def served_predictors(models: Path, batch: int = 1024) -> tuple[UnionPredictor, dict[str, RegionPredictor]]:
     """The exported ONNX graphs of a models folder as the evaluator's predictors: how a committed
     model (this one or an earlier one) scores on a data set it was not evaluated on."""
-    from training.onnx_export import session
+    from training.common.onnx_export import session
 
     union_graph, localizer_graph = session(models / UNION_FILE), session(models / LOCALIZER_FILE)
 
@@ -73,7 +73,7 @@ def served_predictors(models: Path, batch: int = 1024) -> tuple[UnionPredictor, 
 
 def served_told_predictor(models: Path, batch: int = 1024) -> ToldPredictor | None:
     """The exported union graph told each pair's overlap, or None for a graph without that input."""
-    from training.onnx_export import session
+    from training.common.onnx_export import session
 
     graph = session(models / UNION_FILE)
     if not reads_overlap(graph):

@@ -8,10 +8,10 @@ import numpy as np
 import torch
 
 from app.contract import INTERVAL_Z
-from training.learning.union_config import MONOTONE
-from training.learning.union_memory import common_scale, relative_log
-from training.learning.union_net import SIGMA_FLOOR, UnionOperator
-from training.learning.union_predict import predict, tensor
+from training.union.config import MONOTONE
+from training.union.memory import common_scale, relative_log
+from training.union.net import SIGMA_FLOOR, UnionOperator
+from training.union.predict import predict, tensor
 
 DECREASE_WEIGHTS = (0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)  # σ's decrease term, relative to the spread's
 DISAGREEMENT_WEIGHTS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)  # σ's disagreement term, relative to the spread's

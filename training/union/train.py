@@ -21,19 +21,19 @@ import torch
 from scipy import sparse
 
 from app.contract import UNKNOWN_OVERLAP
+from training.common.data import PairTable, SpectralData
+from training.common.fit import LoopSettings, Objective, fit, pick_device, seed_everything
+from training.common.spectral_errors import spectral_errors
 from training.data.pairs import FULL_COVERAGE
 from training.data.spectra import REMESHED
 from training.data.splits import TEST_B_MAX_IOU
-from training.learning.corrections import ToldCorrection
-from training.learning.data import PairTable, SpectralData
-from training.learning.fit import LoopSettings, Objective, fit, pick_device, seed_everything
-from training.learning.spectral_errors import spectral_errors
-from training.learning.union_blend import fit_blend_on
-from training.learning.union_config import UnionConfig
-from training.learning.union_memory import common_scale, disjoint_union, relative_log
-from training.learning.union_net import SIGMA_FLOOR, UnionOperator
-from training.learning.union_predict import build_operator, memory_rows, predict, same_body, tensor
-from training.learning.union_sigma import calibrate, calibrate_told
+from training.union.blend import fit_blend_on
+from training.union.config import UnionConfig
+from training.union.corrections import ToldCorrection
+from training.union.memory import common_scale, disjoint_union, relative_log
+from training.union.net import SIGMA_FLOOR, UnionOperator
+from training.union.predict import build_operator, memory_rows, predict, same_body, tensor
+from training.union.sigma import calibrate, calibrate_told
 
 
 @dataclass(frozen=True)

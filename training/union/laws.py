@@ -15,11 +15,11 @@ import numpy as np
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.inference.models import SpectralModels
 from app.inference.template import RegionBoundaries
+from training.common.spectral_errors import spectral_errors
 from training.data.camera import body_mesh, close_up_camera, orbit_camera, view_mask
 from training.data.pairs import NESTED_SHARE
 from training.data.regions import RegionSampler
 from training.data.spectra import region_mesh, remeshed
-from training.learning.spectral_errors import spectral_errors
 
 SEED = 20_261_201  # no data set build draws from this stream
 

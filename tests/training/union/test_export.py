@@ -6,11 +6,11 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("onnxscript")
 
-from training.learning.corrections import ToldCorrection  # noqa: E402
-from training.learning.export import export_union, session  # noqa: E402
-from training.learning.union_config import UnionConfig  # noqa: E402
-from training.learning.union_memory import UnionMemory  # noqa: E402
-from training.learning.union_net import UnionOperator  # noqa: E402
+from training.union.config import UnionConfig  # noqa: E402
+from training.union.corrections import ToldCorrection  # noqa: E402
+from training.union.export import export_union, session  # noqa: E402
+from training.union.memory import UnionMemory  # noqa: E402
+from training.union.net import UnionOperator  # noqa: E402
 
 
 def test_onnx_and_pytorch_retrieve_the_same_pairs_among_near_ties(tmp_path):

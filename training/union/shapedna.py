@@ -15,9 +15,9 @@ import numpy as np
 
 from app.retrieval.distance import nearest_of
 from app.retrieval.seed import SEED_FILE
+from training.common.data import PairTable, SpectralData
 from training.data.pairs import FULL_COVERAGE
 from training.data.spectra import MESH, task_spectrum
-from training.learning.data import PairTable, SpectralData
 
 TOP = (1, 5, 10)
 

@@ -8,9 +8,9 @@ from app.geometry.spectrum import eigenvalues
 from app.geometry.topology import boundary_vertex_mask
 from app.inference.template import PART_NAMES
 from tests.conftest import grid
-from training.learning.baselines import UnionLookup, disjoint_union, elementwise_min, larger_part
-from training.learning.card import per_eigenvalue_table
-from training.learning.masks import symmetric_scores, united_by_mirror_rule
+from training.card.tables import per_eigenvalue_table
+from training.localizer.masks import symmetric_scores, united_by_mirror_rule
+from training.union.baselines import UnionLookup, disjoint_union, elementwise_min, larger_part
 
 
 @pytest.fixture
@@ -94,7 +94,7 @@ def test_parts_united_in_the_orientation_that_overlaps():
 
 def test_retrieval_hit_rates_hand_checked():
     """Three people, two poses each; a query may not match the shape its scans came from."""
-    from training.learning.shapedna import hit_rates
+    from training.union.shapedna import hit_rates
 
     base = np.sort(np.random.default_rng(1).uniform(1, 50, 20))
     people = np.array([0, 0, 1, 1, 2, 2])

@@ -7,10 +7,10 @@ from collections.abc import Iterator
 import numpy as np
 import torch
 
-from training.learning.data import PairTable, SpectralData
-from training.learning.union_config import UnionConfig
-from training.learning.union_memory import UnionMemory
-from training.learning.union_net import UnionOperator
+from training.common.data import PairTable, SpectralData
+from training.union.config import UnionConfig
+from training.union.memory import UnionMemory
+from training.union.net import UnionOperator
 
 
 def tensor(array: np.ndarray, device: torch.device) -> torch.Tensor:

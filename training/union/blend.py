@@ -9,12 +9,12 @@ import torch
 from scipy.optimize import minimize
 from scipy.special import expit
 
-from training.learning.data import SpectralData
-from training.learning.spectral_errors import spectral_errors
-from training.learning.union_config import MONOTONE
-from training.learning.union_memory import EPSILON
-from training.learning.union_net import UNFITTED_BLEND, UnionOperator
-from training.learning.union_predict import batches, memory_rows, predict
+from training.common.data import SpectralData
+from training.common.spectral_errors import spectral_errors
+from training.union.config import MONOTONE
+from training.union.memory import EPSILON
+from training.union.net import UNFITTED_BLEND, UnionOperator
+from training.union.predict import batches, memory_rows, predict
 
 # The blend's search (fit_blend): Nelder–Mead from w ≈ 0.27 for every pair, a simplex of edge 2;
 # with chains, refitted this many times, each time with the inner unions the last fit makes.

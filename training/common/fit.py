@@ -1,7 +1,7 @@
 """What every training run shares: device choice, seeding, the loop with its schedule, early
 stopping and resumable checkpoints.
 
-Each trainer (:mod:`training.learning.train_union`, :mod:`training.learning.train_localizer`)
+Each trainer (:mod:`training.union.train`, :mod:`training.localizer.train`)
 says only what is its own: how a batch of rows becomes a loss, and how an epoch is validated.
 A checkpoint is a plain dict (weights, optimizer, scheduler, config, epoch, best metric, best
 weights) so that it loads without this package's classes and a killed run resumes exactly.

@@ -6,11 +6,11 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from training.learning.corrections import ToldCorrection  # noqa: E402
-from training.learning.localizer_net import Localizer, LocalizerConfig, feature_statistics  # noqa: E402
-from training.learning.union_config import MONOTONE, PRIOR, UnionConfig  # noqa: E402
-from training.learning.union_memory import EPSILON, UnionMemory, common_scale, relative_log  # noqa: E402
-from training.learning.union_net import UnionOperator  # noqa: E402
+from training.localizer.net import Localizer, LocalizerConfig, feature_statistics  # noqa: E402
+from training.union.config import MONOTONE, PRIOR, UnionConfig  # noqa: E402
+from training.union.corrections import ToldCorrection  # noqa: E402
+from training.union.memory import EPSILON, UnionMemory, common_scale, relative_log  # noqa: E402
+from training.union.net import UnionOperator  # noqa: E402
 
 
 def spectra(count: int, seed: int) -> torch.Tensor:
@@ -371,7 +371,7 @@ def test_calibration_covers_ninety_percent_and_bins_pairs_by_what_makes_them_unc
     is in no bin (it is exact) unless its parts are re-meshed (then its union differs by the
     meshing), re-meshed pairs have their own bin, a re-scan 1 % apart is in the one-region bin,
     different parts in the others."""
-    from training.learning.union_sigma import (
+    from training.union.sigma import (
         FLOOR_GRID,
         IDENTICAL_BIN,
         REMESHED_BIN,
@@ -411,9 +411,9 @@ def test_the_blend_fitted_on_validation_pairs_finds_which_decrease_their_unions_
     """Validation unions (and chains (A ∪ B) ∪ C) made by the network's decrease alone keep the
     blend (near) off; made by the neighbours' median decrease, the fitted blend follows it
     (w → 1): in both cases the fitted operator reproduces them far better than the other answer."""
-    from training.learning.spectral_errors import spectral_errors
-    from training.learning.union_blend import fit_blend
-    from training.learning.union_net import UNFITTED_BLEND
+    from training.common.spectral_errors import spectral_errors
+    from training.union.blend import fit_blend
+    from training.union.net import UNFITTED_BLEND
 
     model = operator("deepsets")
     a, b, c = spectra(400, 50), spectra(400, 51) * 0.5, spectra(400, 52) * 0.7
@@ -441,7 +441,7 @@ def test_the_blend_fitted_on_validation_pairs_finds_which_decrease_their_unions_
 def test_a_state_saved_before_the_floor_was_a_weight_loads_with_the_fixed_floor_it_had():
     """Older checkpoints have no ``sigma_floor`` (theirs was SIGMA_FLOOR scaled with the spread)
     and no ``sigma_split`` (theirs was 0)."""
-    from training.learning.union_net import SIGMA_FLOOR
+    from training.union.net import SIGMA_FLOOR
 
     saved = operator("deepsets").state_dict()
     saved["sigma_scale"] = torch.tensor(0.9)

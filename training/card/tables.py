@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from training.learning.masks import UNION_WITH_PARTS
+from training.localizer.masks import UNION_WITH_PARTS
 
 BEGIN, END = "<!-- metrics:begin -->", "<!-- metrics:end -->"
 CARD, EVALUATION = "MODEL_CARD.md", "EVALUATION.md"

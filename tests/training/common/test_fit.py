@@ -6,7 +6,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from training.learning.fit import LoopSettings, Objective, fit, seed_everything  # noqa: E402
+from training.common.fit import LoopSettings, Objective, fit, seed_everything  # noqa: E402
 
 SETTINGS = LoopSettings(epochs=10, batch=8, learning_rate=0.1, weight_decay=0.0, first_restart=10, patience=10)
 

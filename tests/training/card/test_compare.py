@@ -1,10 +1,10 @@
-"""Before/after tables (training.learning.compare) on the committed metrics."""
+"""Before/after tables (training.card.compare) on the committed metrics."""
 
 import copy
 import json
 from pathlib import Path
 
-from training.learning.compare import comparison
+from training.card.compare import comparison
 
 METRICS = Path(__file__).resolve().parents[3] / "models" / "metrics.json"
 

@@ -6,7 +6,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from training.learning.union_config import UnionConfig
+from training.union.config import UnionConfig
 
 
 def _mlp(inputs: int, width: int, outputs: int, dropout: float) -> nn.Sequential:
@@ -147,7 +147,7 @@ class EncoderLayer(nn.TransformerEncoderLayer):
     and slices, and at batch 1 onnxruntime's time is per node: one ``Split`` and one
     ``Attention`` (the heads split inside the operator) leave the union graph ~200 nodes smaller
     and faster at every batch size (`benchmarks/RESULTS.md`), computing the same to float32
-    rounding (`tests/training/learning/test_models.py` compares the two). Training keeps
+    rounding (`tests/training/union/test_models.py` compares the two). Training keeps
     PyTorch's own attention, whose gradients the served checkpoint was trained with; so do
     masks, which the operator never passes.
     """

@@ -1,0 +1,1 @@
+"""The model card and the evaluation pages: tables rendered from metrics, before → after comparisons."""
