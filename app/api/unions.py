@@ -6,7 +6,7 @@ operator, timed, and the warnings collected. Each of those routes takes one para
 
 import time
 from dataclasses import dataclass
-from typing import Annotated, Literal
+from typing import Annotated
 
 import anyio
 import numpy as np
@@ -41,11 +41,7 @@ from app.inference.models import (
     require_overlap_reader,
 )
 from app.inference.region_tokens import RegionTokens
-from app.sessions.chain import Located, template_fold
-
-# Where a union's overlaps came from: the client, registered views' footprints, or the parts'
-# places on the template.
-OverlapSource = Literal["told", "footprints", "correspondence"]
+from app.sessions.chain import Located, OverlapSource, folded_union
 
 
 @dataclass(frozen=True)
@@ -131,18 +127,10 @@ async def union_of_operands(
     covers = [part.counted for part in placed] + (carried or [])
     if len(covers) != len(operands):
         covers = None  # some operand's place is unknown: the spectral localizer and no measured overlap
-    told_overlaps, told_boundaries, nesting = overlaps, boundaries, None
-    if covers is not None and source is None and len(covers) > 1:
-        fold = template_fold(models, _located(models, placed, carried or []))
-        overlaps, boundaries, source = fold.overlaps, fold.boundaries, "correspondence"
-        told_overlaps, told_boundaries, nesting = fold.told, fold.told_boundaries, fold.nesting
-    started = time.perf_counter()
+    located = None if covers is None else _located(models, placed, carried or [])
     values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
-    result = await anyio.to_thread.run_sync(models.union, values, told_overlaps, told_boundaries, nesting)
-    steps = len(operands) - 1 if source is not None else 0  # a doubted operand's steps are read, not measured
-    nested = list(result.nested) if nesting is not None else [False] * steps
-    told_steps = told_overlaps if told_overlaps is not None else [None] * steps
-    tell = [share is not None or step for share, step in zip(told_steps, nested, strict=True)]
+    started = time.perf_counter()
+    folded = await anyio.to_thread.run_sync(folded_union, models, values, located, overlaps, boundaries, source)
     seconds = time.perf_counter() - started
     INFERENCE.labels("union").observe(seconds)
     warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]
@@ -150,15 +138,15 @@ async def union_of_operands(
     warnings += size_warnings(values, [o.source for o in operands])
     return UnionOutcome(
         operands,
-        result,
+        folded.result,
         solve_ms,
         seconds * 1e3,
         warnings,
-        overlaps or [],
-        boundaries or [],
-        source,
-        tell,
-        nested,
+        folded.overlaps,
+        folded.boundaries,
+        folded.source,
+        folded.told,
+        folded.nested,
         placed,
         covers,
     )

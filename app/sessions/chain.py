@@ -9,6 +9,7 @@ three mean one thing by "the chain".
 """
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -16,6 +17,10 @@ from app.inference.correspondence import PlacedPart, counted
 from app.inference.cover import Cover
 from app.inference.models import SpectralModels, UnionEstimate
 from app.inference.nesting import Nesting
+
+# Where a union's overlaps came from: the client, registered views' footprints, or the parts'
+# places on the template.
+OverlapSource = Literal["told", "footprints", "correspondence"]
 
 
 @dataclass(frozen=True)
@@ -81,6 +86,46 @@ def template_fold(models: SpectralModels, located: list[Located]) -> TemplateFol
 def chained_union(models: SpectralModels, values: list[np.ndarray], fold: TemplateFold) -> UnionEstimate:
     """The operands' spectra folded through the learned operator, told what ``fold`` says."""
     return models.union(values, fold.told, fold.told_boundaries, fold.nesting)
+
+
+@dataclass(frozen=True)
+class FoldedUnion:
+    """A union folded through the learned operator: the estimate; each step's overlap and
+    boundary share as told or measured (empty where neither) and where they came from; per step,
+    whether the operator was told it and whether it was told nested instead."""
+
+    result: UnionEstimate
+    overlaps: list[float]
+    boundaries: list[float]
+    source: OverlapSource | None
+    told: list[bool]
+    nested: list[bool]
+
+
+def folded_union(
+    models: SpectralModels,
+    values: list[np.ndarray],
+    located: list[Located] | None,
+    overlaps: list[float] | None,
+    boundaries: list[float] | None,
+    source: OverlapSource | None,
+) -> FoldedUnion:
+    """The union of ``values`` (the operands' spectra, in order): told ``overlaps`` and
+    ``boundaries`` where they came from ``source`` (the client, or measured on registered
+    footprints); else, where every operand is ``located`` on the template, told what their
+    places say (:func:`template_fold`); else untold. Every route that answers a union folds here,
+    so one request means one thing whichever route it went to."""
+    told_overlaps, told_boundaries, nesting = overlaps, boundaries, None
+    if located is not None and source is None and len(located) > 1:
+        fold = template_fold(models, located)
+        overlaps, boundaries, source = fold.overlaps, fold.boundaries, "correspondence"
+        told_overlaps, told_boundaries, nesting = fold.told, fold.told_boundaries, fold.nesting
+    result = models.union(values, told_overlaps, told_boundaries, nesting)
+    steps = len(values) - 1 if source is not None else 0
+    nested = list(result.nested) if nesting is not None else [False] * steps
+    told_steps = told_overlaps if told_overlaps is not None else [None] * steps
+    told = [share is not None or step for share, step in zip(told_steps, nested, strict=True)]
+    return FoldedUnion(result, overlaps or [], boundaries or [], source, told, nested)
 
 
 def _worth_telling(
