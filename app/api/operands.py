@@ -21,6 +21,7 @@ from app.api.solver import SolverPool
 from app.core.config import Settings
 from app.core.errors import InputError
 from app.geometry.descriptors import Places
+from app.geometry.formats import listed
 from app.geometry.io import resolve_file_type
 from app.geometry.overlap import Footprint
 from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport
@@ -34,7 +35,7 @@ OPERAND_FIELDS = ("files", "spectra")  # the form fields that carry operands
 # The operand parameters of every union-based route.
 FilesField = Annotated[
     list[UploadFile] | None,
-    File(max_length=MAX_OPERANDS, description="Partial scans (mesh or point cloud), one operand each."),
+    File(max_length=MAX_OPERANDS, description="Partial scans, one operand each: " + listed()),
 ]
 SpectraField = Annotated[
     str | None,

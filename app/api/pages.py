@@ -12,12 +12,21 @@ from pathlib import Path
 
 from fastapi import FastAPI
 from fastapi.openapi.docs import get_swagger_ui_html
-from fastapi.responses import FileResponse, HTMLResponse
+from fastapi.responses import HTMLResponse
 from fastapi.staticfiles import StaticFiles
+
+from app.geometry.formats import accept_attribute, listed
 
 STATIC_DIR = Path(__file__).resolve().parents[1] / "static"
 STATIC_URL = "/static"
 SWAGGER_URL = f"{STATIC_URL}/swagger-ui"
+
+
+def session_page() -> str:
+    """The session page, its file picker offering the accepted upload formats
+    (:mod:`app.geometry.formats`): the page does not keep a list of its own."""
+    page = (STATIC_DIR / "session" / "index.html").read_text()
+    return page.replace("{formats}", listed()).replace("{accept}", accept_attribute())
 
 
 def install_pages(app: FastAPI) -> None:
@@ -25,9 +34,11 @@ def install_pages(app: FastAPI) -> None:
     ``docs_url=None`` so FastAPI's CDN page is not registered)."""
     app.mount(STATIC_URL, StaticFiles(directory=STATIC_DIR), name="static")
 
+    page = session_page()
+
     @app.get("/", include_in_schema=False)
-    async def session() -> FileResponse:
-        return FileResponse(STATIC_DIR / "session" / "index.html", media_type="text/html")
+    async def session() -> HTMLResponse:
+        return HTMLResponse(page)
 
     @app.get("/docs", include_in_schema=False)
     async def docs() -> HTMLResponse:

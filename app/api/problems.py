@@ -15,6 +15,7 @@ from starlette.routing import Match
 
 from app.core.errors import InputError
 from app.geometry.errors import UnsupportedFileType
+from app.geometry.formats import listed
 from app.retrieval.store import StoreUnavailable
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
@@ -74,7 +75,7 @@ EXAMPLES: dict[int, list[tuple[str, str, str]]] = {
         (
             "unsupported-file-type",
             "Unsupported file type",
-            "file type 'zip' is not accepted; allowed: glb, npy, obj, off, ply, stl, txt, xyz",
+            f"file type 'zip' is not accepted; allowed: {listed()}",
         )
     ],
     422: [

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.geometry.errors import SceneTooLarge, TooManyFaces, TooManyVertices, UnreadableFile
+from app.geometry.formats import TEXT_TYPES
 
 # A closed triangle mesh has about two faces per vertex; four leaves room for meshes whose
 # vertices are split at seams, and still bounds what a face list can cost.
@@ -39,7 +40,6 @@ OBJ_LINES_PER_VERTEX = 3
 STL_BINARY_HEADER, STL_BINARY_FACET = 84, 50
 GLTF_FLOAT = 5126  # glTF componentType of 32-bit floats
 UTF8_BOM = b"\xef\xbb\xbf"
-TEXT_TYPES = frozenset({"ply", "off", "obj", "stl", "xyz", "txt"})
 
 _PLY_FORMAT = re.compile(rb"format[ \t]+(ascii|binary_little_endian|binary_big_endian)[ \t]+1\.0")
 _PLY_PROPERTY = re.compile(rb"property[ \t]+(?:list[ \t]+\S+[ \t]+)?\S+[ \t]+\S+")

@@ -23,12 +23,8 @@ from app.geometry.errors import (
     UnsupportedFileType,
     library_reason,
 )
+from app.geometry.formats import ACCEPTED, listed
 from app.geometry.shapes import Mesh, PointCloud, Shape
-
-MESH_TYPES = frozenset({"ply", "obj", "off", "stl", "glb"})
-POINT_TYPES = frozenset({"xyz", "txt", "npy"})
-# PLY holds either: a PLY without faces is a point cloud.
-ALLOWED_TYPES = MESH_TYPES | POINT_TYPES
 
 UNIT_TO_METRES = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 MAX_POINT_COLUMNS = 16  # x y z, a normal, a colour with alpha, and a few scanner fields
@@ -72,10 +68,9 @@ def resolve_file_type(filename: str | None, explicit: str | None = None) -> str:
     """
     candidate = explicit or (PurePosixPath(filename).suffix.lstrip(".") if filename else "")
     file_type = candidate.lower().strip()
-    if file_type not in ALLOWED_TYPES:
-        allowed = ", ".join(sorted(ALLOWED_TYPES))
+    if file_type not in ACCEPTED:
         shown = repr(candidate) if candidate else "none"
-        raise UnsupportedFileType(f"file type {shown} is not accepted; allowed: {allowed}")
+        raise UnsupportedFileType(f"file type {shown} is not accepted; allowed: {listed()}")
     return file_type
 
 
@@ -98,7 +93,7 @@ def load_shape(data: bytes, file_type: str, *, scale: float = 1.0, max_vertices:
     data : bytes
         The whole upload.
     file_type : str
-        One of ``ALLOWED_TYPES`` (see :func:`resolve_file_type`).
+        One of :data:`app.geometry.formats.ACCEPTED` (see :func:`resolve_file_type`).
     scale : float
         Multiplier to metres (see :func:`unit_scale`).
     max_vertices : int
@@ -108,7 +103,7 @@ def load_shape(data: bytes, file_type: str, *, scale: float = 1.0, max_vertices:
     ------
     UnsupportedFileType, UnreadableFile, TooManyVertices
     """
-    if file_type not in ALLOWED_TYPES:
+    if file_type not in ACCEPTED:
         raise UnsupportedFileType(f"file type {file_type!r} is not accepted")
     try:
         shape = _parsed(data, file_type, max_vertices)

@@ -15,7 +15,8 @@ from app.api.metrics import INFERENCE
 from app.api.operands import ScaleQuery, UnitsQuery, upload_options
 from app.api.problems import MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, ProblemError, problem_responses
 from app.api.responses import MODEL_VERSION_FIELD, NPZ_MEDIA_TYPE, DetailQuery, shaped
-from app.geometry.io import ALLOWED_TYPES, resolve_file_type
+from app.geometry.formats import listed
+from app.geometry.io import resolve_file_type
 from app.geometry.pipeline import Solved
 from app.inference.correspondence import Placement
 from app.inference.models import SpectralModels
@@ -99,7 +100,7 @@ async def correspondence(
     settings: SettingsDep,
     models: ModelsDep,
     tokens: TokensDep,
-    file: Annotated[UploadFile, File(description="Mesh or point cloud: " + ", ".join(sorted(ALLOWED_TYPES)))],
+    file: Annotated[UploadFile, File(description="Mesh or point cloud: " + listed())],
     units: UnitsQuery = "m",
     scale: ScaleQuery = None,
     closed: Annotated[bool, Query(description="Point clouds only: the cloud is a closed surface.")] = False,

@@ -28,7 +28,8 @@ from app.api.problems import (
 )
 from app.api.responses import MODEL_VERSION_FIELD, UnionInterval
 from app.core.config import Settings
-from app.geometry.io import ALLOWED_TYPES, UNIT_TO_METRES, resolve_file_type
+from app.geometry.formats import listed
+from app.geometry.io import UNIT_TO_METRES, resolve_file_type
 from app.geometry.plausibility import size_warnings
 from app.inference.cover import Cover
 from app.inference.models import SpectralModels
@@ -158,7 +159,7 @@ async def add_view(
     models: ModelsDep,
     sessions: SessionsDep,
     settings: SettingsDep,
-    file: Annotated[UploadFile, File(description="One view: mesh or point cloud, " + ", ".join(sorted(ALLOWED_TYPES)))],
+    file: Annotated[UploadFile, File(description="One view: mesh or point cloud, " + listed())],
     file_type: Annotated[str | None, Query(description="Overrides the upload's extension.")] = None,
     boundary: Annotated[str | None, Form(description="Point clouds: JSON list of boundary point indices.")] = None,
 ) -> SessionResponse:

@@ -16,6 +16,7 @@ from app.api.operands import CapHolesQuery, ScaleQuery, UnitsQuery, solve_upload
 from app.api.problems import DATABASE_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, ProblemError, problem_responses
 from app.api.solver import SolverPool
 from app.geometry.errors import InvalidGeometry
+from app.geometry.formats import listed
 from app.geometry.io import resolve_file_type
 from app.geometry.pipeline import SpectrumOptions, SpectrumReport
 from app.geometry.plausibility import ImplausibleSize
@@ -67,7 +68,7 @@ async def add_shape(
     settings: SettingsDep,
     models: ModelsDep,
     store: StoreDep,
-    file: Annotated[UploadFile, File(description="A complete (closed) shape.")],
+    file: Annotated[UploadFile, File(description="A complete (closed) shape: " + listed())],
     label: Annotated[str, Form(min_length=1, max_length=200, description="Identity label.")],
     units: UnitsQuery = "m",
     scale: ScaleQuery = None,

@@ -13,7 +13,8 @@ from app.api.operands import CapHolesQuery, solve_upload, upload_options
 from app.api.problems import UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
 from app.api.responses import NPZ_MEDIA_TYPE
 from app.core.errors import InputError
-from app.geometry.io import ALLOWED_TYPES, resolve_file_type
+from app.geometry.formats import listed
+from app.geometry.io import resolve_file_type
 from app.geometry.overlap import footprint_token
 from app.geometry.pipeline import SpectrumReport
 from app.geometry.spectrum import DEFAULT_K, MAX_K
@@ -45,7 +46,7 @@ class FootprintedReport(SpectrumReport):
 async def spectrum(
     request: Request,
     settings: SettingsDep,
-    file: Annotated[UploadFile, File(description="Mesh or point cloud: " + ", ".join(sorted(ALLOWED_TYPES)))],
+    file: Annotated[UploadFile, File(description="Mesh or point cloud: " + listed())],
     k: Annotated[int, Query(ge=1, le=MAX_K, description="Number of eigenvalues.")] = DEFAULT_K,
     units: Annotated[Literal["m", "cm", "mm"], Query(description="Units of the file.")] = "m",
     scale: Annotated[float | None, Query(gt=0, description="Factor to metres; overrides units.")] = None,
