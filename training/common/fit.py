@@ -4,7 +4,10 @@ stopping and resumable checkpoints.
 Each trainer (:mod:`training.union.train`, :mod:`training.localizer.train`)
 says only what is its own: how a batch of rows becomes a loss, and how an epoch is validated.
 A checkpoint is a plain dict (weights, optimizer, scheduler, config, epoch, best metric, best
-weights) so that it loads without this package's classes and a killed run resumes exactly.
+weights) so that it loads without this package's classes and a killed run resumes exactly. It
+is continued only by the run configuration it was trained with: a checkpoint of another width,
+feature set or schedule left in the runs folder is refused (:class:`OtherRecipe`), never taken
+up as if it were this run's.
 """
 
 import random
@@ -79,6 +82,39 @@ class Progress:
         return False
 
 
+# How long a run goes on is not its recipe: the same run, trained further or stopped later, is
+# the run an uninterrupted one of that length would be (the schedule does not read them).
+CONTINUABLE = ("training.epochs", "training.patience")
+
+
+class OtherRecipe(ValueError):
+    """A run's checkpoint was trained by another recipe than the one asked for."""
+
+
+def require_recipe(path: Path, held: dict | None, config: dict) -> None:
+    """Refuse to continue the checkpoint at ``path`` (trained with ``held``) as a run of
+    ``config``, naming what differs."""
+    held, config = _flat(held or {}), _flat(config)
+    differs = sorted(
+        key for key in held.keys() | config.keys() if key not in CONTINUABLE and held.get(key) != config.get(key)
+    )
+    if not differs:
+        return
+    shown = ", ".join(f"{key}: {held.get(key)!r} there, {config.get(key)!r} here" for key in differs[:4])
+    raise OtherRecipe(f"{path} was trained by another recipe ({shown}): move it away or train into another runs folder")
+
+
+def _flat(config: dict, prefix: str = "") -> dict:
+    """A nested configuration as dotted keys, so that a difference is named where it lies."""
+    out = {}
+    for key, value in config.items():
+        if isinstance(value, dict):
+            out |= _flat(value, f"{prefix}{key}.")
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
 def snapshot(model: torch.nn.Module) -> dict:
     """A detached copy of the weights (the best epoch's, kept while training goes on)."""
     return {k: v.detach().clone() for k, v in model.state_dict().items()}
@@ -125,9 +161,12 @@ def load_checkpoint(
     optimizer: torch.optim.Optimizer,
     schedule: torch.optim.lr_scheduler.LRScheduler,
     generator: torch.Generator,
+    config: dict,
 ) -> tuple[Progress, dict]:
-    """Restore a run in place (batch order and noise included); returns its progress and best weights."""
+    """Restore a run of ``config`` in place (batch order and noise included); returns its progress
+    and best weights. Raises :class:`OtherRecipe` for a checkpoint of another configuration."""
     state = torch.load(path, map_location="cpu", weights_only=False)
+    require_recipe(path, state.get("config"), config)
     model.load_state_dict(state["weights"])
     optimizer.load_state_dict(state["optimizer"])
     schedule.load_state_dict(state["schedule"])
@@ -185,7 +224,7 @@ def fit(
     )
     progress, best = Progress(), snapshot(model)
     if checkpoint.exists():
-        progress, best = load_checkpoint(checkpoint, model, optimizer, schedule, generator)
+        progress, best = load_checkpoint(checkpoint, model, optimizer, schedule, generator, run_config)
     device = next(model.parameters()).device
     steps = max(1, objective.samples // settings.batch)
     epochs = progress.remaining(settings.epochs, settings.patience)

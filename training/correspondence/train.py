@@ -16,6 +16,7 @@ import torch
 
 from app.contract import CORRESPONDENCE_INPUTS
 from app.inference.template import Template
+from training.common.fit import OtherRecipe
 from training.correspondence.net import CorrespondenceConfig, CorrespondenceNet, stencil_matrices, template_patches
 
 PLACE_WEIGHT = 10.0  # per metre: 1 cm of place error costs as much as 0.1 nats
@@ -54,10 +55,6 @@ def load_parts(directory: Path, split: str) -> list[dict[str, np.ndarray]]:
 def torch_inputs(part: dict[str, np.ndarray]) -> tuple[torch.Tensor, ...]:
     """A part's graph inputs as tensors, in the contract's order."""
     return tuple(torch.as_tensor(part[name]) for name in CORRESPONDENCE_INPUTS)
-
-
-class OtherRecipe(ValueError):
-    """A run's checkpoint was trained by another recipe than the one asked for."""
 
 
 def recipe(preset: TrainingPreset, seed: int) -> dict:

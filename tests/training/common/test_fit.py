@@ -6,7 +6,14 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from training.common.fit import LoopSettings, Objective, fit, seed_everything  # noqa: E402
+from training.common.fit import (  # noqa: E402
+    LoopSettings,
+    Objective,
+    OtherRecipe,
+    fit,
+    seed_everything,
+    validation_history,
+)
 
 SETTINGS = LoopSettings(epochs=10, batch=8, learning_rate=0.1, weight_decay=0.0, first_restart=10, patience=10)
 
@@ -66,3 +73,31 @@ def test_clip_norm_bounds_the_gradient_the_optimizer_receives(tmp_path, clip_nor
         assert given > 1.0  # the raw gradient of this line is large
     else:
         assert given == pytest.approx(clip_norm, rel=1e-4)
+
+
+def _line_run(tmp_path, settings: LoopSettings, config: dict) -> None:
+    """A few epochs of the line's fit checkpointed at run.pt, under ``config``."""
+    generator = seed_everything(0)
+    model = torch.nn.Linear(1, 1)
+    x = torch.linspace(-1, 1, 16)[:, None]
+
+    def batch_loss(rows: torch.Tensor) -> torch.Tensor:
+        return (model(x[rows]) - 2 * x[rows]).pow(2).mean()
+
+    objective = Objective("line", len(x), batch_loss, lambda: 1.0, str)
+    fit(model, objective, settings, tmp_path / "run.pt", config, generator)
+
+
+def test_a_checkpoint_of_another_recipe_is_refused_naming_the_difference(tmp_path):
+    short = replace(SETTINGS, epochs=2)
+    _line_run(tmp_path, short, {"model": {"width": 8}, "training": {"epochs": 2, "seed": 0}})
+    with pytest.raises(OtherRecipe, match="model.width: 8 there, 16 here"):
+        _line_run(tmp_path, SETTINGS, {"model": {"width": 16}, "training": {"epochs": 10, "seed": 0}})
+    with pytest.raises(OtherRecipe, match="training.seed"):
+        _line_run(tmp_path, SETTINGS, {"model": {"width": 8}, "training": {"epochs": 10, "seed": 1}})
+
+
+def test_the_same_recipe_trained_longer_continues(tmp_path):
+    _line_run(tmp_path, replace(SETTINGS, epochs=2), {"model": {"width": 8}, "training": {"epochs": 2}})
+    _line_run(tmp_path, replace(SETTINGS, epochs=4), {"model": {"width": 8}, "training": {"epochs": 4}})
+    assert len(validation_history(tmp_path / "run.pt")) == 4

@@ -16,10 +16,11 @@ from app.geometry.descriptors import mesh_inputs  # noqa: E402
 from app.geometry.topology import drop_unreferenced, referenced  # noqa: E402
 from app.inference.template import Template, faces_inside  # noqa: E402
 from tests.conftest import bumpy_patch  # noqa: E402
+from training.common.fit import OtherRecipe  # noqa: E402
 from training.common.onnx_export import relative_difference  # noqa: E402
 from training.correspondence.export import correspondence_parity, export_correspondence, training_path  # noqa: E402
 from training.correspondence.net import CorrespondenceConfig, basis_gradient, stencil_matrices  # noqa: E402
-from training.correspondence.train import OtherRecipe, TrainingPreset, restored, torch_inputs, train  # noqa: E402
+from training.correspondence.train import TrainingPreset, restored, torch_inputs, train  # noqa: E402
 
 CONFIG = CorrespondenceConfig(width=16, blocks=2, patches=24, neighbourhood_m=0.2, offset_m=0.05)
 
