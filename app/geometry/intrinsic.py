@@ -149,7 +149,7 @@ def _flip_to_delaunay(t: _Triangulation) -> bool:
 
 def _distinct(half: np.ndarray, count: int) -> np.ndarray:
     """``np.unique`` of half-edge indices below ``count``, by marking them: a pass over every
-    half-edge costs less than hashing and sorting the few of a round (5 → 0.6 ms a body)."""
+    half-edge costs less than hashing and sorting the few of a round."""
     marked = np.zeros(count, dtype=bool)
     marked[half] = True
     return np.flatnonzero(marked)

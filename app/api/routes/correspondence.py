@@ -110,9 +110,8 @@ async def correspondence(
         PlacesKind,
         Query(
             description="relaxed: the network's places relaxed toward the part's own edge lengths, then everything "
-            "else read from them: on held-out anny parts a fifth to a third closer to the true places on average "
-            "(camera views 3.1–3.8 → 2.4–3.1 cm), the region within about a point of the network's either way; "
-            "~45 ms more for a 6 000-vertex part."
+            "else read from them: closer to the true places on held-out anny parts, the region about the "
+            "network's (the model card's correspondence table), at some cost (docs/api.md)."
         ),
     ] = "network",
     format: Annotated[

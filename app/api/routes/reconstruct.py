@@ -13,7 +13,7 @@ with a boundary (a partial scan, or a whole-body scan with blind spots: λ₁ > 
 body, and both are read by the network that learned the operator's error, partial unions and
 blind spots (the graph routes each row itself). A whole body uploaded as one scan with
 ``cap_holes=true`` has its holes capped first and is read as the closed body it was (unknown
-people's scans with blind spots: 17.2 → 8.3 mm, ``benchmarks.decoder_blind_spots``). The
+people's scans with blind spots come back about half as far off: ``benchmarks.decoder_blind_spots``). The
 loop is closed on the spectrum: the rebuilt body goes through the same solver workers as an
 upload, and its own spectrum comes back beside the one it was decoded from, so a client sees
 how far to trust it. A union of parts that do not cover the body is decoded all the same (the
@@ -81,7 +81,7 @@ def round_trip_warnings(verdict: RoundTrip, gap: float) -> list[str]:
         return [
             f"the union's spectrum is an open surface's (λ₁ > 0: holes such as the soles, or a small part "
             f"unseen): the body is rebuilt closed, so its spectrum is {100 * gap:.0f} % from the union's, as a "
-            "complete scan with blind spots comes back (model card: such scans decode to ~9–28 mm)"
+            "complete scan with blind spots comes back (the model card says how far such scans decode)"
         ]
     return []
 

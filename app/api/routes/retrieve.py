@@ -13,9 +13,9 @@ upload (``app.main``). A whole-body scan uploaded as a mesh does better still wi
 Two operands whose overlap is not told leave their union uncertain mostly through that one
 number: a closed union of two is ranked by its **share profile**, each stored shape at its
 distance to the nearest of the unions told each share of ``PROFILE_SHARES``, i.e. under the
-overlap that explains that shape best (the card's two-part union queries: the right person
-first 60 → 74 % of the time among the closed ones, 57 → 70 % over all of them as ranked; told
-the true share, 77 %; ``benchmarks.retrieval_open_surfaces``).
+overlap that explains that shape best: the right person comes first more often than under the
+operator's own guess of the share, nearly as often as told the true one
+(``benchmarks.retrieval_open_surfaces``, its table in ``benchmarks/RESULTS.md``).
 """
 
 from typing import Annotated, Literal
