@@ -95,17 +95,19 @@ def _solve_task(
     ``place_with`` (the correspondence graph's path) the part is placed here too (its places
     ``relaxed`` where asked), under the same cap and deadline, if no unit slip is plain in its size.
     """
+    failed = False
     try:
         placing = place_with is not None
         solved = solve_bytes(data, file_type, options, vectors=vectors, footprint=footprint, descriptors=placing)
         if placing:
             placeable_size(solved.report.area_m2, solved.report.scale_to_metres)
-        return replace(solved, places=places_in_worker(place_with, solved.part, relaxed)) if placing else solved
+        finished = replace(solved, places=places_in_worker(place_with, solved.part, relaxed)) if placing else solved
     except MemoryError:
-        pass
-    gc.collect()
-    _return_freed_heap()
-    raise SolveMemoryExceeded("the solve needed more memory than a solver worker may use")
+        failed = True
+    _after_task(failed)
+    if failed:
+        raise SolveMemoryExceeded("the solve needed more memory than a solver worker may use")
+    return finished
 
 
 def _session_task(views: list[View], places: list[np.ndarray] | None, k: int) -> np.ndarray | AlignedUnion | None:
@@ -113,13 +115,24 @@ def _session_task(views: list[View], places: list[np.ndarray] | None, k: int) ->
     (:func:`app.sessions.fused.fused_spectrum`), or, with their ``places``, views in their own
     frames aligned first (:func:`app.sessions.aligned.aligned_union`: those that came together;
     None where too many did not); a memory failure answered as a solve's is."""
+    failed = False
     try:
-        return fused_spectrum(views, k) if places is None else aligned_union(views, places, k)
+        finished = fused_spectrum(views, k) if places is None else aligned_union(views, places, k)
     except MemoryError:
-        pass
-    gc.collect()
+        failed = True
+    _after_task(failed)
+    if failed:
+        raise SolveMemoryExceeded("the session's fused views needed more memory than a solver worker may use")
+    return finished
+
+
+def _after_task(failed: bool) -> None:
+    """Give back to the system what a task freed, so a worker returns to about its idle size
+    after every task, not after its largest (``python -m benchmarks.worker_memory``); after a
+    memory failure, first what its traceback held (cycles included)."""
+    if failed:
+        gc.collect()
     _return_freed_heap()
-    raise SolveMemoryExceeded("the session's fused views needed more memory than a solver worker may use")
 
 
 def _return_freed_heap() -> None:
