@@ -5,30 +5,13 @@ composition), on two parts of the template body placed as uploads are."""
 import numpy as np
 import pytest
 
-from app.core.config import Settings
-from app.geometry.pipeline import SpectrumOptions, solve_bytes
-from app.inference.models import SpectralModels
-from app.inference.template import Template
-from app.samples import PARTS, template_part
 from app.sessions.aligned import AlignedUnion
 from app.sessions.session import chained_onto_aligned, session_union, session_view
 
 
 @pytest.fixture(scope="module")
-def models() -> SpectralModels:
-    return SpectralModels(Settings().models_dir)
-
-
-@pytest.fixture(scope="module")
-def views(models):
-    template = Template.load(Settings().models_dir)
-    out = []
-    for name, removed in PARTS.items():
-        solved = solve_bytes(
-            template_part(template, removed), "ply", SpectrumOptions(k=models.k), vectors=False, descriptors=True
-        )
-        out.append(session_view(name, solved, models.correspondence.placed(solved.part), []))
-    return out
+def views(sample_parts):
+    return [session_view(name, solved, placed, []) for name, solved, placed in sample_parts]
 
 
 def test_all_views_joined_is_the_aligned_union(models, views):

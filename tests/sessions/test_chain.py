@@ -6,31 +6,13 @@ operator is commutative and an overlap is a property of the pair)."""
 import numpy as np
 import pytest
 
-from app.core.config import Settings
-from app.geometry.pipeline import SpectrumOptions, solve_bytes
-from app.inference.models import SpectralModels
-from app.inference.template import Template
-from app.samples import PARTS, template_part
 from app.sessions.chain import Located, folded_union
 
 
 @pytest.fixture(scope="module")
-def models() -> SpectralModels:
-    return SpectralModels(Settings().models_dir)
-
-
-@pytest.fixture(scope="module")
-def parts(models):
-    """The README's two sample parts, solved and placed as uploads are: (spectrum, located)."""
-    template = Template.load(Settings().models_dir)
-    out = []
-    for removed in PARTS.values():
-        solved = solve_bytes(
-            template_part(template, removed), "ply", SpectrumOptions(k=models.k), vectors=False, descriptors=True
-        )
-        placed = models.correspondence.placed(solved.part)
-        out.append((np.asarray(solved.report.eigenvalues), Located.placed(placed)))
-    return out
+def parts(sample_parts):
+    """The sample parts as the fold reads them: (spectrum, where each lies)."""
+    return [(np.asarray(solved.report.eigenvalues), Located.placed(placed)) for _, solved, placed in sample_parts]
 
 
 def test_told_shares_pass_through_as_told(models, parts):
