@@ -4,16 +4,16 @@ type all read this list, so a new format is a record here, its reader in :mod:`a
 and its size check in :mod:`app.geometry.declared`.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Format:
     """One accepted file type: its ``name`` (the extension, or the ``file_type`` parameter),
     whether it holds a mesh (a PLY without faces is a point cloud) and points, whether it is text
     (a UTF-8 byte-order mark is dropped before it is read), and how the docs describe it."""
 
-    name: str
+    name: str = field(kw_only=False)
     mesh: bool
     points: bool
     text: bool
@@ -23,24 +23,25 @@ class Format:
 FORMATS = (
     Format(
         "ply",
-        True,
-        True,
-        True,
-        "ASCII or binary; without faces a point cloud, optionally with a vertex property `boundary`",
+        mesh=True,
+        points=True,
+        text=True,
+        described="ASCII or binary; without faces a point cloud, optionally with a vertex property `boundary`",
     ),
-    Format("obj", True, False, True, "an `mtllib` or `usemtl` line is ignored"),
-    Format("off", True, False, True, "(C/N)OFF headers"),
-    Format("stl", True, False, True, "ASCII or binary"),
-    Format("glb", True, False, False, "binary glTF; a buffer URI is refused"),
+    Format("obj", mesh=True, points=False, text=True, described="an `mtllib` or `usemtl` line is ignored"),
+    Format("off", mesh=True, points=False, text=True, described="(C/N)OFF headers"),
+    Format("stl", mesh=True, points=False, text=True, described="ASCII or binary"),
+    Format("glb", mesh=True, points=False, text=False, described="binary glTF; a buffer URI is refused"),
     Format(
         "xyz",
-        False,
-        True,
-        True,
-        "one `x y z` or `x,y,z` row a point, every row as wide as the first; a first row of column names is skipped",
+        mesh=False,
+        points=True,
+        text=True,
+        described="one `x y z` or `x,y,z` row a point, every row "
+        "as wide as the first; a first row of column names is skipped",
     ),
-    Format("txt", False, True, True, "as `xyz`"),
-    Format("npy", False, True, False, "an `(n, 3)` real array, no pickles"),
+    Format("txt", mesh=False, points=True, text=True, described="as `xyz`"),
+    Format("npy", mesh=False, points=True, text=False, described="an `(n, 3)` real array, no pickles"),
 )
 
 ACCEPTED = frozenset(f.name for f in FORMATS)
