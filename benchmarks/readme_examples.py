@@ -17,8 +17,6 @@ Run it after the models change, so that no example shows what an earlier model s
 
 import argparse
 import json
-import subprocess
-import sys
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,13 +27,20 @@ from app.geometry.overlap import TOKEN_PREFIX
 from app.inference.region_tokens import PREFIX as REGION_TOKEN_PREFIX
 from app.inference.template import Template
 from app.samples import sample_overlap, write_samples
+from tests.readme import (
+    BEGIN,
+    CLIENT_BEGIN,
+    CLIENT_END,
+    END,
+    KEY,
+    URL,
+    client_code,
+    run_client,
+    run_command,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 README, API_DOC, EXAMPLES = ROOT / "README.md", ROOT / "docs" / "api.md", ROOT / "app" / "api" / "examples.json"
-BEGIN, END = "<!-- examples:begin -->", "<!-- examples:end -->"
-CLIENT_BEGIN, CLIENT_END = "<!-- client:begin -->", "<!-- client:end -->"
-URL = "http://127.0.0.1:8000"  # as the README writes it; a test runs the commands against its own
-KEY = "change-me"
 TOKEN_SHOWN = 24  # characters of a footprint or region token shown and recorded
 UNION_THEN = "(the union's fields as above, then:)\n"
 
@@ -205,30 +210,8 @@ def examples(overlap: float) -> list[Example]:
 
 
 def run(example: Example, folder: Path, url: str = URL) -> str:
-    """What ``example``'s command prints, run by bash in ``folder`` against ``url``; CalledProcessError
-    when it fails (curl -s fails on no answer, jq on no JSON)."""
-    command = example.command.replace(URL, url)
-    return subprocess.run(
-        ["bash", "-o", "pipefail", "-c", command], cwd=folder, capture_output=True, text=True, check=True, timeout=300
-    ).stdout
-
-
-def readme_commands(text: str) -> list[str]:
-    """The commands of the README's examples block, as written there."""
-    block = text[text.index(BEGIN) : text.index(END)]
-    return [line[2:] for line in block.splitlines() if line.startswith("$ ")]
-
-
-def client_code(text: str) -> str:
-    """The Python client example of the README, as written there."""
-    block = text[text.index(CLIENT_BEGIN) : text.index(CLIENT_END)]
-    return block.split("```python\n", 1)[1].split("```", 1)[0]
-
-
-def run_client(code: str, folder: Path, url: str = URL) -> str:
-    """What the client example prints, run by this Python in ``folder`` against ``url``."""
-    command = [sys.executable, "-c", code.replace(URL, url)]
-    return subprocess.run(command, cwd=folder, capture_output=True, text=True, check=True, timeout=300).stdout
+    """What ``example``'s command prints (:func:`tests.readme.run_command`)."""
+    return run_command(example.command, folder, url)
 
 
 def with_client_output(text: str, output: str) -> str:

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.readme_examples import KEY, URL, Example, client_code, readme_commands, run, run_client
 from tests.api.servers import serving
+from tests.readme import KEY, URL, client_code, readme_commands, run_client, run_command
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
@@ -54,7 +54,7 @@ def test_every_documented_command_runs_as_written(service, samples):
     commands = readme_commands(API_DOC)
     assert len(commands) >= 20
     for command, shown in zip(commands, _shown_answers(API_DOC), strict=True):
-        output = run(Example(command), samples, service)
+        output = run_command(command, samples, service)
         if output.startswith("{"):
             answer = json.loads(output)
             assert ("/problems/" in str(answer.get("type", ""))) == ("/problems/" in shown), command
