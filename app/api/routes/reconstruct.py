@@ -61,12 +61,12 @@ class ReconstructResponse(UnionResponse):
     )
     spectrum_relative_error: float = Field(
         description="Mean relative difference of λ₂…λ_k between the rebuilt body's spectrum and the union's "
-        "(λ₁ of a closed body is 0): the decoder's own check, 1.3 % on complete bodies' spectra and 4.8 % on "
-        "two-part unions on average (model card); over 10 % adds a warning. An open surface's spectrum (λ₁ > 0: "
-        "a scan with holes) cannot come back as a closed body's: up to 60 % it adds a note (complete scans with "
-        "blind spots come back 11–45 % away), over 60 % the warning (a large part of the body unseen); for an open "
-        "union the operator predicted (several operands) the warning comes over 25 % (unions of parts covering the "
-        "body come back 1–21 % away, of parts that leave a tenth of it out or more 26–76 %)."
+        "(λ₁ of a closed body is 0): the decoder's own check (its figures on complete bodies and two-part "
+        "unions: the model card); over 10 % adds a warning. An open surface's spectrum (λ₁ > 0: a scan with holes) "
+        "cannot come back as a closed body's: up to 60 % it adds a note, over 60 % the warning (a large part of "
+        "the body unseen); for an open union the operator predicted (several operands) the warning comes over 25 % "
+        "(where these thresholds fall among complete scans with blind spots and unions that cover the body or "
+        "not: docs/api.md, the rebuilt body)."
     )
 
 

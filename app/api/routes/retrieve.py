@@ -5,10 +5,10 @@ scanned with its soles or the top of its head unseen, or scans that leave a part
 boundary, and its spectrum is of another kind (λ₁ > 0, every eigenvalue raised): ranked as it
 is, the nearest stored shapes are the smallest bodies, whoever was scanned. Such a union is
 ranked through the body the shape decoder rebuilds from it, whose own closed spectrum is
-comparable (``benchmarks.retrieval_open_surfaces``: complete scans with blind spots found
-first 35 % of the time instead of 1 %). That costs a solve, so the route is admitted like an
-upload (``app.main``). A whole-body scan uploaded as a mesh does better still with
-``cap_holes=true``: its blind spots capped, it is a closed surface and ranked as one (65 %).
+comparable (``benchmarks.retrieval_open_surfaces`` measures how much more often the right
+person comes first). That costs a solve, so the route is admitted like an upload
+(``app.main``). A whole-body scan uploaded as a mesh does better still with ``cap_holes=true``:
+its blind spots capped, it is a closed surface and ranked as one.
 
 Two operands whose overlap is not told leave their union uncertain mostly through that one
 number: a closed union of two is ranked by its **share profile**, each stored shape at its
@@ -95,19 +95,19 @@ def open_surface_warning(rebuild: bool, body: RebuiltBody | None) -> str:
         return (
             f"the query is an open surface (λ₁ > 0: holes, or parts of the body unseen), ranked by its own spectrum "
             f"{why}: the stored shapes are closed, and the nearest to an open surface's spectrum are the smallest "
-            "bodies, whoever was scanned (complete scans with blind spots: the right person first 1 % of the time)"
+            "bodies, whoever was scanned (benchmarks/RESULTS.md: retrieval_open_surfaces)"
         )
     if body.verdict == "unseen":
         return (
             f"the query is an open surface that leaves a large part of the body unseen (the body rebuilt from it "
             f"comes back {100 * body.gap:.0f} % from its spectrum): the matches are the stored shapes nearest that "
-            "body, not an identification (partial unions: the right person first 0–8 % of the time, either way)"
+            "body, not an identification (partial unions seldom find the right person first, either way)"
         )
     return (
         "the query is an open surface (λ₁ > 0: holes such as the soles or the top of the head), ranked through the "
-        "body the shape decoder rebuilds from it, whose closed spectrum compares with the stored shapes' (complete "
-        "scans with blind spots: the right person first 35 % of the time this way, 1 % by their own spectrum; "
-        "one whole-body scan uploaded with cap_holes=true, its holes capped: 65 %)"
+        "body the shape decoder rebuilds from it, whose closed spectrum compares with the stored shapes' (more "
+        "often right than its own spectrum, less than a whole-body scan sent with cap_holes=true: "
+        "benchmarks/RESULTS.md, retrieval_open_surfaces)"
     )
 
 
