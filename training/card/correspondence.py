@@ -29,7 +29,7 @@ def render(metrics: dict, command: str) -> str:
     pairs = metrics["pairs"]
     lines = [
         BEGIN,
-        f"Produced by `{command}`.",
+        f"Produced by `{command}`. {recipe_line(metrics['training'])}",
         "",
         "Parts placed on the template (means over parts; error: each vertex's place against its true rest-pose "
         "vertex, area-weighted; IoU area-weighted; coverage error: mean over the 16 body parts of the covered "
@@ -93,6 +93,21 @@ def render(metrics: dict, command: str) -> str:
         END,
     ]
     return "\n".join(lines)
+
+
+def recipe_line(training: dict) -> str:
+    """The recipe the served weights were trained by, as the run recorded it (its checkpoint's
+    preset), so the card cannot describe another network than the one served."""
+    config = training["config"]
+    restarts = training.get("restarts", [])
+    schedule = f"{training['steps']:,} steps at learning rate {training['learning_rate']:g}".replace(",", " ")
+    if restarts:
+        schedule += ", then " + ", ".join(f"{steps:,} at {rate:g}".replace(",", " ") for steps, rate in restarts)
+    return (
+        f"Recipe (`{training['name']}`): {config['blocks']} DiffusionNet blocks of width {config['width']}, "
+        f"{config['patches']} template patches, places averaged within {100 * config['neighbourhood_m']:g} cm, "
+        f"offset at most {100 * config['offset_m']:g} cm; {schedule} (cosine cycles)."
+    )
 
 
 def cost_line(cost: dict) -> str:
