@@ -30,7 +30,7 @@ from app.inference.cover import Cover, united
 from app.inference.models import SpectralModels, UnionEstimate
 from app.sessions.aligned import AlignedUnion, left_out
 from app.sessions.calibration import Bands, SessionCalibration
-from app.sessions.chain import Located, chained_union, template_fold
+from app.sessions.chain import Located, folded_union
 from app.sessions.fused import View, view_of_part
 
 UnionBy = Literal["empty", "view", "fused", "aligned", "aligned-and-chained", "learned-chain"]
@@ -125,11 +125,8 @@ def aligned_and_chained_sigma(chained: UnionEstimate, aligned: Bands, views: int
 
 def _chained(models: SpectralModels, values: list[np.ndarray], located: list[Located], by: UnionBy) -> SessionUnion:
     """The learned operator folded over ``values``, each step told what ``located`` says."""
-    fold = template_fold(models, located)
-    estimate = chained_union(models, values, fold)
-    told = fold.told or [None] * (len(values) - 1)
-    steps = [share is not None or nested for share, nested in zip(told, estimate.nested, strict=True)]
-    return SessionUnion(estimate, by, fold.overlaps, steps)
+    folded = folded_union(models, values, located, None, None, None)
+    return SessionUnion(folded.result, by, folded.overlaps, folded.told)
 
 
 def session_cover(views: list[SessionView]) -> Cover | None:
