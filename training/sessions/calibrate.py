@@ -28,7 +28,7 @@ from training.card.tables import replace_block
 from training.sessions.card import BEGIN, END, render
 from training.sessions.evaluate import evaluate_sessions
 from training.sessions.reading import Read, read_prefixes, session_views
-from training.sessions.scans import VARIANTS, K, people, relative_error
+from training.sessions.scans import EVERYONE, VARIANTS, K, people, relative_error
 
 BANDS = (3, 8, 16, 32)  # a band holds sessions of more views than the band before, up to this many
 LENGTHS = (2, 3, 4, 6, 8, 12, 16, 24, 32)
@@ -37,7 +37,7 @@ COVERAGE = 0.90
 
 def reads(models: SpectralModels, count: int, seed: int) -> list[Read]:
     """Every session prefix of ``count`` people of ``seed``, both deliveries, read every way."""
-    sampler, found = people(count, seed)
+    sampler, found = people(count, seed, EVERYONE)  # children too: the people scanned are
     faces = sampler.template.faces
     out = []
     for number, person in enumerate(found):

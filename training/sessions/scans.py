@@ -55,19 +55,25 @@ def session_masks(sampler: RegionSampler, body: np.ndarray, rng: np.random.Gener
     return [mask for mask in masks if mask is not None]
 
 
-def people(count: int, seed: int) -> tuple[RegionSampler, list[Person]]:
-    """``count`` anny people outside the training identities (half men, half women), each in one
-    random pose, and their sessions."""
+ADULTS = ("man", "woman")
+EVERYONE = ("man", "woman", "child")  # as Test C's people are drawn: men, women and children
+
+
+def people(count: int, seed: int, kinds: tuple[str, ...] = ADULTS) -> tuple[RegionSampler, list[Person]]:
+    """``count`` anny people outside the training identities (as many of each of ``kinds`` as
+    the count allows, the first kinds taking the remainder), each in one random pose, and their
+    sessions."""
     from training.data.bodies import AnnySource
 
     source = AnnySource()
     sampler = RegionSampler(source.template())
     found = []
-    for number, label in enumerate(("man", "woman")):
-        share = count // 2 + (count % 2 if number == 0 else 0)
+    for number, label in enumerate(kinds):
+        share = count // len(kinds) + (1 if number < count % len(kinds) else 0)
         if share == 0:  # anny draws no empty batch
             continue
-        identities = source.body.sample_identities(seed * 100 + number, label, f"unknown_{label}", share)
+        group = label if label == "child" else f"unknown_{label}"
+        identities = source.body.sample_identities(seed * 100 + number, label, group, share)
         for index, identity in enumerate(identities):
             rng = np.random.default_rng([seed, number, index])
             found.append(_scanned(source, sampler, identity, rng, f"calibration_{label}-{seed}-{index:03d}"))
