@@ -2,7 +2,7 @@
 it answered.
 
     SPECTRAL_UNIONS_API_KEY=change-me make run            # in one shell
-    .venv/bin/python benchmarks/readme_examples.py         # in another
+    .venv/bin/python -m benchmarks.readme_examples        # in another
 
 Writes the samples (``spectral-unions samples``) to a temporary folder and runs each command of
 :func:`examples` there with bash (curl and jq, as a reader would), then replaces the block

@@ -11,8 +11,11 @@ the blend would let each part's translation absorb the limbs' lengths; with it, 
 body is recovered within 2 mm (``docs/decisions/039-the-body-is-fitted-to-the-views.md``).
 
 Gauss–Newton on the coefficients and the 16 motions, each point's residual down-weighted past
-:data:`ROBUST_M` (places are a few cm off, some far), its template vertex re-chosen every few
-rounds as the posed model's nearest vertex among those within :data:`REPLACE_M` of its place.
+:data:`ROBUST_M` (places are a few cm off, some far), its template vertex re-chosen every
+round once the pose has settled, as the posed model's nearest vertex among those within
+:data:`REPLACE_M` of its place. The places shrink toward the body's middle (a regression's answer
+under doubt), so the fit is led outward a vertex or so a round until it stops moving
+(``docs/decisions/039-the-body-is-fitted-to-the-views.md``).
 The coefficients' posterior covariance gives each vertex's uncertainty: the less the views saw,
 the larger (the basis ties every vertex to every other, so a side unseen is not by itself less
 certain than the side seen).
@@ -30,8 +33,8 @@ from app.sessions.aligned import rigid_fit
 NOISE_M = 0.01  # a point's residual scale: places and poses err by about this much
 ROBUST_M = 0.02  # residuals beyond this weigh less (Cauchy): wrong places must not pull the body
 REPLACE_M = 0.06  # a point's template vertex is re-chosen among those placed this near its place
-ROUNDS = 20
-REPLACE_FROM, REPLACE_EVERY = 6, 3  # rounds: once the pose has settled, every few rounds
+ROUNDS = 30  # the fit stops moving by then (more rounds: the same body)
+REPLACE_FROM = 6  # rounds before the template vertices are re-chosen: the pose settles first
 MOTION_DAMPING = 1e-2  # a part no point sees keeps its motion
 MIN_POINTS = 200  # fewer points fix neither shape nor pose
 MIN_DAMPING, MAX_DAMPINGS = 1e-4, 6  # Levenberg–Marquardt: the least damping, the most tries a step gets
@@ -147,7 +150,7 @@ def fit_body(
     fit = _Fit(model, points, places, template, poses)
     for round_ in range(ROUNDS):
         fit.step()
-        if round_ >= REPLACE_FROM and round_ % REPLACE_EVERY == 0:
+        if round_ >= REPLACE_FROM:
             fit.replace()
     return fit.result()
 
