@@ -23,7 +23,7 @@ import numpy as np
 
 from app.inference.models import SpectralModels
 from app.sessions.body import NoBodyFits, fitted_views
-from app.sessions.chain import Located, chained_union, template_fold
+from app.sessions.chain import Located, folded_union
 from app.sessions.session import session_view
 from training.reconstruction.evaluate import closed_spectrum, rigidly_aligned
 from training.sessions.identities import Gallery, rank_of
@@ -54,7 +54,7 @@ def read(models: SpectralModels, gallery: Gallery, person: Person, pair: tuple[i
     except NoBodyFits:
         found["fitted"] = None
     values = [np.asarray(view.report.eigenvalues) for view in solved]
-    union = chained_union(models, values, template_fold(models, [Located.placed(p) for p in placed]))
+    union = folded_union(models, values, [Located.placed(p) for p in placed], None, None, None).result
     found["decoded"] = models.reconstruct(union.eigenvalues, union.sigma)
     return {name: None if body is None else scored(models, gallery, person, body) for name, body in found.items()}
 

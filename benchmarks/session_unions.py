@@ -29,7 +29,7 @@ import numpy as np
 from app.geometry.overlap import measured_fold
 from app.geometry.pipeline import Solved
 from app.inference.models import SpectralModels
-from app.sessions.chain import Located, chained_union, template_fold
+from app.sessions.chain import Located, folded_union
 from app.sessions.fused import fused_spectrum, view_of_part
 from training.sessions.scans import VARIANTS, K, people, relative_error, solved_view, union_spectrum, view_meshes
 
@@ -47,7 +47,7 @@ def errors(models: SpectralModels, views: list[Solved], placed: list, truth: np.
     if len(views) == 1:
         found["chain"] = found["chain told"] = relative_error(values[0], truth)
         return found
-    chained = chained_union(models, values, template_fold(models, [Located.placed(part) for part in placed]))
+    chained = folded_union(models, values, [Located.placed(part) for part in placed], None, None, None).result
     found["chain"] = relative_error(chained.eigenvalues, truth)
     fold = measured_fold([v.footprint for v in views])
     measured = models.union(values, fold.overlaps, fold.boundaries if models.reads_boundary else None)

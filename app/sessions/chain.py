@@ -83,11 +83,6 @@ def template_fold(models: SpectralModels, located: list[Located]) -> TemplateFol
     return TemplateFold(overlaps, boundaries, told, edges, _nesting(models, confidence, area))
 
 
-def chained_union(models: SpectralModels, values: list[np.ndarray], fold: TemplateFold) -> UnionEstimate:
-    """The operands' spectra folded through the learned operator, told what ``fold`` says."""
-    return models.union(values, fold.told, fold.told_boundaries, fold.nesting)
-
-
 @dataclass(frozen=True)
 class FoldedUnion:
     """A union folded through the learned operator: the estimate; each step's overlap and
