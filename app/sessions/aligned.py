@@ -138,14 +138,6 @@ def left_out(joined: list[int], views: int) -> list[int]:
     return sorted(set(range(views)) - set(joined))
 
 
-def aligned_spectrum(views: list[View], places: list[np.ndarray], k: int) -> np.ndarray | None:
-    """The first ``k`` eigenvalues of views sent in their own frames, brought into one through
-    their places and fused (:func:`app.sessions.fused.fused_spectrum`); None where they do not
-    all come together."""
-    union = aligned_union(views, places, k, max_left_share=0.0)
-    return None if union is None else union.eigenvalues
-
-
 def aligned_union(
     views: list[View], places: list[np.ndarray], k: int, max_left_share: float = MAX_LEFT_SHARE
 ) -> AlignedUnion | None:

@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 from app.geometry.laplacian import mesh_operators
 from app.geometry.shapes import Mesh
 from app.geometry.topology import boundary_vertex_mask, drop_unreferenced
-from app.sessions.aligned import aligned_spectrum, aligned_union, aligned_views, rigid_fit
+from app.sessions.aligned import aligned_union, aligned_views, rigid_fit
 from app.sessions.fused import View, fused_spectrum, view_of
 from tests.conftest import bumpy_patch
 
@@ -76,7 +76,9 @@ def test_the_aligned_union_is_the_registered_union():
     views, places = three_views()
     sent, _ = moved(views, seed=4)
     # within what a rotation alone moves robust-laplacian's point-cloud Laplacian: a few tenths of a per cent
-    np.testing.assert_allclose(aligned_spectrum(sent, places, K), fused_spectrum(views, K), rtol=5e-3)
+    union = aligned_union(sent, places, K, max_left_share=0.0)  # every view joined
+    assert union is not None and union.joined == [0, 1, 2]
+    np.testing.assert_allclose(union.eigenvalues, fused_spectrum(views, K), rtol=5e-3)
 
 
 def test_views_of_two_poses_are_not_aligned():
