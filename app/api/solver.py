@@ -26,7 +26,7 @@ import resource
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import anyio
 import numpy as np
@@ -75,6 +75,9 @@ def _map_blas_buffers() -> None:
     blas.dgemm(1.0, square, square)
 
 
+Result = TypeVar("Result")
+
+
 def _solve_task(
     data: bytes,
     file_type: str,
@@ -84,55 +87,57 @@ def _solve_task(
     place_with: str | None = None,
     relaxed: bool = False,
 ) -> Solved:
-    """The worker's task: a solve, with a memory failure answered without its traceback.
+    """The worker's task: a solve (:func:`_guarded`). With ``place_with`` (the correspondence
+    graph's path) the part is placed here too (its places ``relaxed`` where asked), under the
+    same cap and deadline, if no unit slip is plain in its size."""
 
-    A ``MemoryError``'s traceback holds the frames of the failed solve, and with them every
-    array it had built. pebble keeps a task's result (the exception) until the worker's next
-    task has finished, so those arrays stayed mapped under the cap while the next upload was
-    solved: a small patch after a failed large grid found ~8 MB of a 120 MB cap free and failed
-    too, or not, by how far the large solve had got. The new error is raised once the handler
-    has let the old one go, so the worker is back at its idle size when it answers. With
-    ``place_with`` (the correspondence graph's path) the part is placed here too (its places
-    ``relaxed`` where asked), under the same cap and deadline, if no unit slip is plain in its size.
-    """
-    failed = False
-    try:
+    def work() -> Solved:
         placing = place_with is not None
         solved = solve_bytes(data, file_type, options, vectors=vectors, footprint=footprint, descriptors=placing)
-        if placing:
-            placeable_size(solved.report.area_m2, solved.report.scale_to_metres)
-        finished = replace(solved, places=places_in_worker(place_with, solved.part, relaxed)) if placing else solved
-    except MemoryError:
-        failed = True
-    _after_task(failed)
-    if failed:
-        raise SolveMemoryExceeded("the solve needed more memory than a solver worker may use")
-    return finished
+        if not placing:
+            return solved
+        placeable_size(solved.report.area_m2, solved.report.scale_to_metres)
+        return replace(solved, places=places_in_worker(place_with, solved.part, relaxed))
+
+    return _guarded(work, "the solve needed more memory than a solver worker may use")
 
 
 def _session_task(views: list[View], places: list[np.ndarray] | None, k: int) -> np.ndarray | AlignedUnion | None:
-    """The worker's task for a session's union: registered views fused and solved once
-    (:func:`app.sessions.fused.fused_spectrum`), or, with their ``places``, views in their own
-    frames aligned first (:func:`app.sessions.aligned.aligned_union`: those that came together;
-    None where too many did not); a memory failure answered as a solve's is."""
+    """The worker's task for a session's union (:func:`_guarded`): registered views fused and
+    solved once (:func:`app.sessions.fused.fused_spectrum`), or, with their ``places``, views in
+    their own frames aligned first (:func:`app.sessions.aligned.aligned_union`: those that came
+    together; None where too many did not)."""
+    return _guarded(
+        lambda: fused_spectrum(views, k) if places is None else aligned_union(views, places, k),
+        "the session's fused views needed more memory than a solver worker may use",
+    )
+
+
+def _guarded(work: Callable[[], Result], failure: str) -> Result:
+    """``work()`` in a worker: what it freed given back to the system when it ends, so a worker
+    returns to about its idle size after every task, not after its largest (``python -m
+    benchmarks.worker_memory``); a memory failure raised as :class:`SolveMemoryExceeded`
+    (``failure``) without its traceback.
+
+    A ``MemoryError``'s traceback holds the frames of the failed work, and with them every array
+    it had built. pebble keeps a task's result (the exception) until the worker's next task has
+    finished, so those arrays stayed mapped under the cap while the next upload was solved: a
+    small patch after a failed large grid found ~8 MB of a 120 MB cap free and failed too, or
+    not, by how far the large solve had got. The new error is raised once the handler has let
+    the old one go (and the cycles it held are collected), so the worker is back at its idle size
+    when it answers.
+    """
     failed = False
     try:
-        finished = fused_spectrum(views, k) if places is None else aligned_union(views, places, k)
+        finished = work()
     except MemoryError:
         failed = True
-    _after_task(failed)
-    if failed:
-        raise SolveMemoryExceeded("the session's fused views needed more memory than a solver worker may use")
-    return finished
-
-
-def _after_task(failed: bool) -> None:
-    """Give back to the system what a task freed, so a worker returns to about its idle size
-    after every task, not after its largest (``python -m benchmarks.worker_memory``); after a
-    memory failure, first what its traceback held (cycles included)."""
     if failed:
         gc.collect()
     _return_freed_heap()
+    if failed:
+        raise SolveMemoryExceeded(failure)
+    return finished
 
 
 def _return_freed_heap() -> None:
