@@ -15,8 +15,8 @@ the spectrum of the union of the views' template masks, solved by the service's 
   places on the template (what ``/v1/union`` answers for unregistered uploads);
 - ``chain told``: the same, told each step's overlap measured from the registered views'
   footprints (``measure_overlap=true``);
-- ``fused``: the registered views fused into one cloud and solved once
-  (:mod:`app.sessions.fused`).
+- ``fused``: the registered views fused into one cloud and solved once, its boundary checked
+  against the body fitted to them, as a solver worker solves it (:mod:`app.sessions.solved`).
 
 Needs the ``train`` extra (anny) and the served models in ``models/``.
 """
@@ -28,22 +28,32 @@ import numpy as np
 
 from app.geometry.overlap import measured_fold
 from app.geometry.pipeline import Solved
+from app.inference.correspondence import PlacedPart
 from app.inference.models import SpectralModels
 from app.sessions.chain import Located, folded_union
-from app.sessions.fused import fused_spectrum, view_of_part
+from app.sessions.fused import view_of_part
+from app.sessions.seen import SeenTemplate
+from app.sessions.solved import solved_union
 from training.sessions.scans import VARIANTS, K, people, relative_error, solved_view, union_spectrum, view_meshes
 
 LENGTHS = (1, 3, 6, 12, 24, 32)
 METHODS = ("min", "chain", "chain told", "fused")
 
 
-def fused(views: list[Solved]) -> np.ndarray:
-    return fused_spectrum([view_of_part(view.part) for view in views], K)
+def fused(views: list[Solved], placed: list[PlacedPart], seen: SeenTemplate) -> np.ndarray:
+    """The registered views' union as a solver worker solves it."""
+    geometry = [view_of_part(view.part) for view in views]
+    return solved_union(geometry, [part.placement.position for part in placed], True, K, seen)
 
 
-def errors(models: SpectralModels, views: list[Solved], placed: list, truth: np.ndarray) -> dict[str, float]:
+def errors(
+    models: SpectralModels, views: list[Solved], placed: list[PlacedPart], truth: np.ndarray, seen: SeenTemplate
+) -> dict[str, float]:
     values = [np.asarray(v.report.eigenvalues) for v in views]
-    found = {"min": relative_error(np.min(values, axis=0), truth), "fused": relative_error(fused(views), truth)}
+    found = {
+        "min": relative_error(np.min(values, axis=0), truth),
+        "fused": relative_error(fused(views, placed, seen), truth),
+    }
     if len(views) == 1:
         found["chain"] = found["chain told"] = relative_error(values[0], truth)
         return found
@@ -63,6 +73,7 @@ def main() -> None:
     parser.add_argument("--models", default="models")
     args = parser.parse_args()
     models = SpectralModels(Path(args.models))
+    seen = SeenTemplate.of(models.body, models.template)
     sampler, found = people(args.people, args.seed)
     faces = sampler.template.faces
     table: dict[tuple[str, int], list[dict[str, float]]] = {}
@@ -74,7 +85,8 @@ def main() -> None:
                 if length > len(views):
                     continue
                 truth = union_spectrum(person.body, faces, person.masks[:length])
-                table.setdefault((variant, length), []).append(errors(models, views[:length], placed[:length], truth))
+                found_errors = errors(models, views[:length], placed[:length], truth, seen)
+                table.setdefault((variant, length), []).append(found_errors)
                 print(variant, length, {k: round(v, 4) for k, v in table[(variant, length)][-1].items()}, flush=True)
     print("\n| views | delivery | sessions | " + " | ".join(METHODS) + " |")
     print("|---|---|---|" + "---|" * len(METHODS))

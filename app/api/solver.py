@@ -40,8 +40,10 @@ from app.core.errors import InputError
 from app.geometry.pipeline import Solved, SpectrumOptions, SpectrumReport, solve_bytes
 from app.geometry.plausibility import placeable_size
 from app.inference.correspondence import places_in_worker
-from app.sessions.aligned import AlignedUnion, aligned_union
-from app.sessions.fused import View, fused_spectrum
+from app.sessions.aligned import AlignedUnion
+from app.sessions.fused import View
+from app.sessions.seen import seen_in_worker
+from app.sessions.solved import solved_union
 
 RETRY_AFTER_SECONDS = 1  # a solve takes ~0.1–0.3 s: a place frees within a second
 _PRELOADED = ["app.geometry.pipeline", "app.inference.correspondence", "app.sessions.aligned"]
@@ -102,13 +104,15 @@ def _solve_task(
     return _guarded(work, "the solve needed more memory than a solver worker may use")
 
 
-def _session_task(views: list[View], places: list[np.ndarray] | None, k: int) -> np.ndarray | AlignedUnion | None:
-    """The worker's task for a session's union (:func:`_guarded`): registered views fused and
-    solved once (:func:`app.sessions.fused.fused_spectrum`), or, with their ``places``, views in
-    their own frames aligned first (:func:`app.sessions.aligned.aligned_union`: those that came
-    together; None where too many did not)."""
+def _session_task(
+    views: list[View], places: list[np.ndarray], registered: bool, k: int, seen_with: str | None
+) -> np.ndarray | AlignedUnion | None:
+    """The worker's task for a session's union (:func:`_guarded`,
+    :func:`app.sessions.solved.solved_union`); ``seen_with``: a models directory whose body
+    basis checks the fused boundary, or None."""
+    seen = None if seen_with is None else seen_in_worker(seen_with)
     return _guarded(
-        lambda: fused_spectrum(views, k) if places is None else aligned_union(views, places, k),
+        lambda: solved_union(views, places, registered, k, seen),
         "the session's fused views needed more memory than a solver worker may use",
     )
 
@@ -226,12 +230,13 @@ class SolverPool:
         return solved
 
     async def session_union(
-        self, views: list[View], places: list[np.ndarray] | None, k: int
+        self, views: list[View], places: list[np.ndarray], registered: bool, k: int, seen_with: str | None
     ) -> np.ndarray | AlignedUnion | None:
         """The first ``k`` eigenvalues of a session's union solved on its views, in a worker under
         the same deadline and memory cap as an upload (:func:`_session_task`)."""
         async with self.limiter:
-            return await self._run(_session_task, (views, places, k), "the solve of the session's views")
+            task = (views, places, registered, k, seen_with)
+            return await self._run(_session_task, task, "the solve of the session's views")
 
     async def _run(self, task: Callable, args: tuple, what: str) -> Any:
         """A task on the pool, its deadline and a dead worker answered as problems."""

@@ -113,12 +113,14 @@ class BodyBasis:
 @dataclass(frozen=True)
 class FittedBody:
     """A fitted body: ``coefficients`` (C,) and their posterior ``covariance`` (C, C), the
-    ``points`` fitted and the median gap between them and the posed body (m)."""
+    ``points`` fitted and the median gap between them and the posed body (m), and ``posed``
+    (poses, V, 3) the body in each pose and frame its points were seen in (None where not kept)."""
 
     coefficients: np.ndarray
     covariance: np.ndarray
     points: int
     residual_m: float
+    posed: np.ndarray | None = None
 
     def vertices(self, model: BodyBasis) -> np.ndarray:
         """(V, 3) the rest-pose body, metres, template vertex order."""
@@ -199,9 +201,8 @@ class _Fit:
         residual, moved = self._residual(self.coefficients, self.rotations, self.translations)
         robust = 1.0 / (1.0 + (np.linalg.norm(residual, axis=1) / ROBUST_M) ** 2)
         jacobian = np.zeros((count, 3, components + 6 * poses * parts))
-        jacobian[:, :, :components] = np.einsum(
-            "nb,nbij,cnj->nic", weights, self.rotations[self.pose], model.components[:, vertex, :]
-        )
+        blended = np.einsum("nb,nbij->nij", weights, self.rotations[self.pose])  # skinning is linear in the rotations
+        jacobian[:, :, :components] = np.einsum("nij,cnj->nic", blended, model.components[:, vertex, :])
         for part in range(parts):
             share = np.flatnonzero(weights[:, part] > 0)
             if len(share) == 0:
@@ -232,16 +233,18 @@ class _Fit:
                 return
             self.damping *= 10
 
+    def posed(self, pose: int) -> np.ndarray:
+        """(V, 3) the body as it stands in ``pose``."""
+        weights = self.model.weights
+        moved = np.einsum("bij,vj->vbi", self.rotations[pose], self.model.rest(self.coefficients))
+        return np.einsum("vb,vbi->vi", weights, moved) + weights @ self.translations[pose]
+
     def replace(self) -> None:
         """Each point taken for its pose's posed body's nearest vertex among those placed within
         REPLACE_M of its place (kept where none is)."""
-        rest = self.model.rest(self.coefficients)
-        weights = self.model.weights
         for pose in range(self.rotations.shape[0]):
             seen = np.flatnonzero(self.pose == pose)
-            moved = np.einsum("bij,vj->vbi", self.rotations[pose], rest)
-            posed = np.einsum("vb,vbi->vi", weights, moved) + weights @ self.translations[pose]
-            distance, candidates = cKDTree(posed).query(self.points[seen], k=8)
+            distance, candidates = cKDTree(self.posed(pose)).query(self.points[seen], k=8)
             near = np.linalg.norm(self.template[candidates] - self.places[seen, None], axis=2) < REPLACE_M
             distance = np.where(near, distance, np.inf)
             found = np.isfinite(distance.min(axis=1))
@@ -253,7 +256,8 @@ class _Fit:
         gap = self._residual(self.coefficients, self.rotations, self.translations)[0]
         covariance = np.linalg.inv(self.hessian)[:components, :components]
         residual = float(np.median(np.linalg.norm(gap, axis=1)))
-        return FittedBody(self.coefficients, (covariance + covariance.T) / 2, len(self.points), residual)
+        posed = np.stack([self.posed(pose) for pose in range(self.rotations.shape[0])])
+        return FittedBody(self.coefficients, (covariance + covariance.T) / 2, len(self.points), residual, posed)
 
 
 def _robust_cost(residual: np.ndarray, coefficients: np.ndarray) -> float:

@@ -171,6 +171,7 @@ class SpectralModels:
 
     def __init__(self, directory: Path, threads: int = 1) -> None:
         checked = verify_manifest(directory)
+        self.directory = directory
         self.template = Template.load(directory)
         self.union_session = _session(directory / UNION_FILE, threads)
         self.localizer_session = _session(directory / LOCALIZER_FILE, threads)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from app.sessions.fused import View, fused_spectrum
+from app.sessions.fused import InsideRule, View, fused_spectrum
 
 PLACE_MATCH_M = 0.03  # points placed this near on the template are taken for one surface point
 MIN_PAIRS = 30  # fewer placed pairs do not fix a motion: the view waits for more of the union
@@ -139,9 +139,14 @@ def left_out(joined: list[int], views: int) -> list[int]:
 
 
 def aligned_union(
-    views: list[View], places: list[np.ndarray], k: int, max_left_share: float = MAX_LEFT_SHARE
+    views: list[View],
+    places: list[np.ndarray],
+    k: int,
+    max_left_share: float = MAX_LEFT_SHARE,
+    inside: InsideRule | None = None,
 ) -> AlignedUnion | None:
-    """The union of the views that come together, fused; None where those left out hold more
+    """The union of the views that come together, fused (``inside``: as
+    :func:`app.sessions.fused.fused_spectrum` reads it); None where those left out hold more
     than ``max_left_share`` of the views' area (the caller chains those left onto it: a view or
     two that do not come together, often a close-up, need not send the whole session through
     the learned chain, which compounds)."""
@@ -150,7 +155,8 @@ def aligned_union(
     area = [float(view.mass.sum()) for view in views]
     if sum(area[i] for i in left) > max_left_share * sum(area):
         return None
-    return AlignedUnion(fused_spectrum(joined.views, k), joined.indices)
+    joined_places = [places[i] for i in joined.indices]
+    return AlignedUnion(fused_spectrum(joined.views, k, joined_places, inside), joined.indices)
 
 
 def _placed_pairs(union_places: cKDTree, places: np.ndarray) -> np.ndarray:

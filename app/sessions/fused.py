@@ -21,7 +21,8 @@ every eigenvalue comes out too high. A few boundary points that make no curve wi
 are freed for the same reason.
 """
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -66,6 +67,16 @@ class FusedCloud:
     boundary: np.ndarray
     capped: int
 
+    def freed(self, inside: np.ndarray) -> "FusedCloud":
+        """The cloud with the boundary points ``inside`` (n,) freed, and the fragments that
+        leaves (:func:`_without_fragments`)."""
+        return replace(self, boundary=_without_fragments(self.points, self.boundary & ~inside))
+
+
+# (views in one frame, each point's place on the template, their fused cloud) → (n,) which of the
+# cloud's boundary points another reading finds inside the union (:mod:`app.sessions.seen`)
+InsideRule = Callable[[list["View"], list[np.ndarray], FusedCloud], np.ndarray]
+
 
 def _reach(tree: cKDTree) -> np.ndarray:
     """(n,) how far each point's own neighbours lie (its second nearest): the view's local
@@ -105,7 +116,7 @@ def fused_cloud(views: list[View]) -> FusedCloud:
     """The union of ``views`` (one frame): each surface point once (the larger view's where two
     cover it), its boundary where a view stops and no other's inside goes on, the pin-holes
     between views capped. Costs a k-d tree query per pair of views."""
-    views = sorted(views, key=_canonical)
+    views = [views[i] for i in canonical_order(views)]
     trees = [cKDTree(view.points) for view in views]
     reaches = [_reach(tree) for tree in trees]
     pairs = {
@@ -182,11 +193,12 @@ def _bridge(
         edge &= ~join
 
 
-def _canonical(view: View) -> tuple[float, int, float]:
+def canonical_order(views: list[View]) -> list[int]:
     """The order views are fused in, whatever order they came in: the largest first (its points
     stand where views overlap), so that any order or grouping of one session's views gives one
     union."""
-    return (-float(view.mass.sum()), -len(view.points), float(view.points.sum()))
+    keys = [(-float(view.mass.sum()), -len(view.points), float(view.points.sum())) for view in views]
+    return sorted(range(len(views)), key=keys.__getitem__)
 
 
 def _pinholes(
@@ -271,10 +283,16 @@ def view_of_part(part: Part) -> View:
     return view_of(part.points, part.mass, part.boundary, part.faces)
 
 
-def fused_spectrum(views: list[View], k: int) -> np.ndarray:
+def fused_spectrum(
+    views: list[View], k: int, places: list[np.ndarray] | None = None, inside: InsideRule | None = None
+) -> np.ndarray:
     """The first ``k`` eigenvalues of the views' union (:func:`fused_cloud`), solved as an
-    uploaded point cloud is: Dirichlet on its boundary, or closed where none is left."""
+    uploaded point cloud is: Dirichlet on its boundary, or closed where none is left; with
+    ``places`` (each view's points' places on the template) and an ``inside`` rule, the boundary
+    points it finds inside the union freed first."""
     cloud = fused_cloud(views)
+    if inside is not None and places is not None:
+        cloud = cloud.freed(inside(views, places, cloud))
     closed = not cloud.boundary.any()
     # Centred: robust-laplacian's point-cloud Laplacian drifts with the distance from the origin
     # (a unit sphere's λ₁ 5 % low 10 m out), and a session's frame is wherever its scanner put it.

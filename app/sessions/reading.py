@@ -16,10 +16,10 @@ from app.sessions.records import SessionMeta
 from app.sessions.session import SessionUnion, SessionView, session_union, union_by
 from app.sessions.store import SessionStore
 
-# (views, their places on the template or None for registered views, k) → the spectrum solved on
-# registered views; for views in their own frames the union of those that came together, or None
-# where too many were left out
-Solve = Callable[[list[View], list[np.ndarray] | None, int], Awaitable[np.ndarray | AlignedUnion | None]]
+# (views, their points' places on the template, registered, k, a models directory whose body basis
+# checks the union's boundary or None) → the spectrum solved on registered views; for views in
+# their own frames the union of those that came together, or None where too many were left out
+Solve = Callable[[list[View], list[np.ndarray], bool, int, str | None], Awaitable[np.ndarray | AlignedUnion | None]]
 
 
 @dataclass(frozen=True)
@@ -46,7 +46,8 @@ async def _read_union(models: SpectralModels, views: list[SessionView], register
     through the chain."""
     by, solved = union_by(len(views), registered, models.sessions), None
     if by in ("fused", "aligned"):
-        places = None if by == "fused" else [view.places for view in views]
-        solved = await solve([view.geometry for view in views], places, models.k)
+        geometry, places = [view.geometry for view in views], [view.places for view in views]
+        seen_with = None if models.body is None else str(models.directory)
+        solved = await solve(geometry, places, by == "fused", models.k, seen_with)
         by = by if solved is not None else "learned-chain"
     return await anyio.to_thread.run_sync(session_union, models, views, by, solved)

@@ -2,7 +2,8 @@
 
 Each view is solved and placed as an upload is; registered views are fused as they are; views in
 their own frames are the same views each moved by a random rigid motion (seeded), as an
-untracked scanner would send them, then aligned through their places and fused; the learned
+untracked scanner would send them, then aligned through their places and fused (either as a
+solver worker solves them, :func:`app.sessions.solved.solved_union`); the learned
 chain and the elementwise minimum read the views' spectra. Shared by the calibration
 (:mod:`training.sessions.calibrate`) and the card's evaluation.
 """
@@ -13,9 +14,11 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from app.inference.models import SpectralModels, UnionEstimate
-from app.sessions.aligned import AlignedUnion, aligned_union
-from app.sessions.fused import View, fused_spectrum
+from app.sessions.aligned import AlignedUnion
+from app.sessions.fused import View
+from app.sessions.seen import SeenTemplate
 from app.sessions.session import SessionView, chained_onto_aligned, session_union, session_view
+from app.sessions.solved import solved_union
 from training.sessions.scans import K, Person, solved_view, union_spectrum, view_meshes
 
 
@@ -74,13 +77,15 @@ def read_prefixes(
 ) -> list[Read]:
     """Every prefix of the session in ``lengths`` (those it reaches), read every way."""
     frames = moved(views, rng)
+    seen = SeenTemplate.of(models.body, models.template)
     found = []
     for length in lengths:
         if length > len(views):
             continue
         prefix = views[:length]
         chained = session_union(models, prefix, "learned-chain").estimate
-        aligned = aligned_union(frames[:length], [view.places for view in prefix], K)
+        places = [view.places for view in prefix]
+        aligned = solved_union(frames[:length], places, False, K, seen)
         found.append(
             Read(
                 length,
@@ -88,7 +93,7 @@ def read_prefixes(
                 np.min([view.eigenvalues for view in prefix], axis=0),
                 chained.eigenvalues,
                 chained.sigma,
-                fused_spectrum([view.geometry for view in prefix], K),
+                solved_union([view.geometry for view in prefix], places, True, K, seen),
                 aligned.eigenvalues if _whole(aligned, length) else None,
                 _partly(models, prefix, aligned),
             )
