@@ -18,7 +18,8 @@ boundary edges, and across views where their loose ends meet); a closed loop no 
 (its points freed, a point at its centre added), as the spectrum definition caps a mesh's
 pin-holes: without it, the gaps views leave between them pin a nearly closed union to zero and
 every eigenvalue comes out too high. A few boundary points that make no curve with any other
-are freed for the same reason.
+are freed for the same reason. What the views' geometry cannot tell (whether a seam a face wide
+between two views is covered), another reading can (``inside``: :mod:`app.sessions.seen`).
 """
 
 from collections.abc import Callable
