@@ -49,10 +49,12 @@ def test_a_posed_body_seen_whole_comes_back_at_rest(basis, template):
     rng = np.random.default_rng(0)
     truth = basis.rest(rng.normal(scale=0.8, size=len(basis.components)))
     seen = rng.choice(len(truth), 3000, replace=False)
-    fitted = fit_body(basis, posed(basis, truth, rng)[seen], template.vertices[seen], template.vertices)
+    body = posed(basis, truth, rng)
+    fitted = fit_body(basis, body[seen], template.vertices[seen], template.vertices)
     error = np.linalg.norm(fitted.vertices(basis) - truth, axis=1)
     assert error.mean() < 0.002  # far below the 20–90 mm that separate one person from another
     assert fitted.residual_m < 0.002
+    assert np.linalg.norm(fitted.posed[0] - body, axis=1).mean() < 0.002  # and as it stood, in its frame
 
 
 def test_a_body_seen_in_part_is_less_certain_than_seen_whole(basis, template):
