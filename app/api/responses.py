@@ -53,14 +53,19 @@ class UnionInterval(BaseModel):
 
 class UnionResponse(UnionInterval):
     operands: list[OperandSpectrum] = Field(description="Each operand's own spectrum, for caching.")
-    union_by: Literal["operand", "learned-chain"] = Field(
-        description="What made the union: operand (one operand, returned as is, σ 0) or learned-chain (the learned "
-        "operator folded over the operands' spectra, left to right). A scanning session's union is read from "
-        "the views themselves where it can be: /v1/sessions."
+    union_by: Literal["operand", "fused", "aligned", "aligned-and-chained", "learned-chain"] = Field(
+        description="What made the union: operand (one operand, returned as is, σ 0); where every operand is an "
+        "uploaded file, the uploads themselves as a scanning session reads its views: fused (declared in one "
+        "frame and pose with measure_overlap=true: their points fused and solved once), aligned (brought into one "
+        "frame through their places on the template, then fused) or aligned-and-chained (a few that did not "
+        "align chained onto the others' union); otherwise learned-chain (the learned operator folded over the "
+        "operands' spectra, left to right: spectra sent without geometry, or told overlaps)."
     )
     model_version: str = MODEL_VERSION_FIELD
     solve_ms: float = Field(description="Eigen-solves of the uploaded files.")
-    inference_ms: float = Field(description="The union operator's time.")
+    inference_ms: float = Field(
+        description="The union's own time: the learned operator, or the uploads fused and solved."
+    )
     overlaps: list[float] = Field(
         default_factory=list,
         description="Each union step's overlap (share of the smaller operand inside the other), as told in "

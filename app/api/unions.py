@@ -28,7 +28,7 @@ from app.api.operands import (
     resolve_operands,
 )
 from app.core.config import Settings
-from app.geometry.overlap import measured_fold
+from app.geometry.overlap import MeasuredFold, measured_fold
 from app.geometry.plausibility import size_warnings
 from app.inference.correspondence import PlacedPart
 from app.inference.cover import Cover, InvalidRegion
@@ -41,7 +41,10 @@ from app.inference.models import (
     require_overlap_reader,
 )
 from app.inference.region_tokens import RegionTokens
-from app.sessions.chain import Located, OverlapSource, folded_union
+from app.sessions.chain import FoldedUnion, Located, OverlapSource, folded_union
+from app.sessions.fused import view_of_part
+from app.sessions.reading import views_union
+from app.sessions.session import SessionUnion, SessionView
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,7 @@ class UnionOutcome:
     overlaps_nested: list[bool]  # per step, whether it was told nested (overlap 1) instead of its measured overlap
     placed: list[PlacedPart]  # each uploaded operand placed on the template, when the correspondence model was run
     covers: list[Cover] | None  # what each operand covers on the template (placed or carried), when every one has one
+    union_by: str  # what made it: "operand", "learned-chain", or the uploads' geometry (app.sessions.session.UnionBy)
 
     def fields(self, models: SpectralModels) -> dict:
         """The response fields every union-based endpoint shares."""
@@ -69,7 +73,7 @@ class UnionOutcome:
             "lower": self.result.lower.tolist(),
             "upper": self.result.upper.tolist(),
             "operands": [{"source": o.source, "eigenvalues": o.eigenvalues} for o in self.operands],
-            "union_by": "operand" if len(self.operands) == 1 else "learned-chain",
+            "union_by": self.union_by,
             "model_version": models.version,
             "solve_ms": round(self.solve_ms, 2),
             "inference_ms": round(self.inference_ms, 2),
@@ -92,10 +96,13 @@ async def union_of_operands(
     cap_holes: bool = False,
     locate: bool = False,
 ) -> UnionOutcome:
-    """Resolve the operands (solving uploaded files) and fold them through the union operator,
-    told the overlap (and boundary share) of each step where the client knows it, or measured
-    from the uploads (``told.measure``: views in one frame and pose), or from where the
-    correspondence model places them (every operand an upload or a spectrum with its region);
+    """Resolve the operands (solving uploaded files) and read their union: where every operand
+    is an upload and no overlap is told, from the uploads' geometry as a session reads its views
+    (:func:`app.sessions.reading.views_union`: fused where ``told.measure`` declares them in one
+    frame and pose, else aligned through their places); otherwise the union operator folded over
+    their spectra, told the overlap (and boundary share) of each step where the client knows it,
+    or measured from the uploads (``told.measure``), or from where the correspondence model places
+    them (every operand an upload or a spectrum with its region);
     ``cap_holes``: one uploaded whole-body scan, its holes capped
     (:func:`app.api.operands.resolve_operands`); ``locate``: the route answers the operands'
     region, so even one upload is placed (others place uploads only to measure a step)."""
@@ -117,39 +124,89 @@ async def union_of_operands(
     checked_overlaps(overlaps, counted.count, models.reads_overlap)
     checked_boundaries(boundaries, overlaps, counted.count, models.reads_boundary)
     operands, solve_ms = await resolve_operands(request, settings, counted, models.k, wanted)
-    source: OverlapSource | None = "told" if overlaps is not None else None
-    if told.measure:  # k-d trees of up to UNION_POINTS points per step: off the event loop
-        footprints = [o.footprint for o in operands if o.footprint is not None]
-        fold = await anyio.to_thread.run_sync(measured_fold, footprints)
-        overlaps, boundaries = fold.overlaps, fold.boundaries if models.reads_boundary else None
-        source = "footprints"
     placed = await anyio.to_thread.run_sync(_placed, models, operands) if places else []
     covers = [part.counted for part in placed] + (carried or [])
     if len(covers) != len(operands):
         covers = None  # some operand's place is unknown: the spectral localizer and no measured overlap
-    located = None if covers is None else _located(models, placed, carried or [])
     values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
-    started = time.perf_counter()
-    folded = await anyio.to_thread.run_sync(folded_union, models, values, located, overlaps, boundaries, source)
-    seconds = time.perf_counter() - started
-    INFERENCE.labels("union").observe(seconds)
     warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]
     warnings += _doubts(operands, placed)
     warnings += size_warnings(values, [o.source for o in operands])
+    started = time.perf_counter()
+    union, by = None, "operand" if len(operands) == 1 else "learned-chain"
+    if overlaps is None and boundaries is None and len(placed) == len(operands) > 1:  # every operand an upload
+        views = [_as_view(operand, part) for operand, part in zip(operands, placed, strict=True)]
+        union = await views_union(models, views, told.measure, request.app.state.solver.session_union)
+    if union is not None:
+        measured = await _measured(operands) if told.measure else None
+        fold, by = _as_folded(union, measured), union.union_by
+    else:
+        fold = await _folded(models, operands, placed, carried or [], covers, overlaps, boundaries, told.measure)
+    seconds = time.perf_counter() - started
+    INFERENCE.labels("union").observe(seconds)
     return UnionOutcome(
         operands,
-        folded.result,
+        fold.result,
         solve_ms,
         seconds * 1e3,
         warnings,
-        folded.overlaps,
-        folded.boundaries,
-        folded.source,
-        folded.told,
-        folded.nested,
+        fold.overlaps,
+        fold.boundaries,
+        fold.source,
+        fold.told,
+        fold.nested,
         placed,
         covers,
+        by,
     )
+
+
+async def _folded(
+    models: SpectralModels,
+    operands: list[Operand],
+    placed: list[PlacedPart],
+    carried: list[Cover],
+    covers: list[Cover] | None,
+    overlaps: list[float] | None,
+    boundaries: list[float] | None,
+    measure: bool,
+) -> FoldedUnion:
+    """The learned operator folded over the operands' spectra: told what the client told, what
+    the registered uploads' footprints measure, or what their places say."""
+    source: OverlapSource | None = "told" if overlaps is not None else None
+    if measure:
+        fold = await _measured(operands)
+        overlaps, boundaries = fold.overlaps, fold.boundaries if models.reads_boundary else None
+        source = "footprints"
+    located = None if covers is None else _located(models, placed, carried)
+    values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
+    return await anyio.to_thread.run_sync(folded_union, models, values, located, overlaps, boundaries, source)
+
+
+async def _measured(operands: list[Operand]) -> MeasuredFold:
+    """Each step's overlap and boundary share measured from the registered uploads' footprints
+    (k-d trees of up to UNION_POINTS points per step: off the event loop)."""
+    footprints = [o.footprint for o in operands if o.footprint is not None]
+    return await anyio.to_thread.run_sync(measured_fold, footprints)
+
+
+def _as_folded(union: SessionUnion, measured: MeasuredFold | None) -> FoldedUnion:
+    """A union read from the uploads' geometry in the fields a fold answers: its steps where a
+    few uploads that did not align were chained onto the others' union; fused, what the uploads'
+    footprints measure (``measured``), told to no operator."""
+    if measured is not None and not union.overlaps:
+        untold = [False] * len(measured.overlaps)
+        return FoldedUnion(union.estimate, measured.overlaps, measured.boundaries, "footprints", untold, untold)
+    source = "correspondence" if union.overlaps else None
+    nested = list(union.estimate.nested)
+    return FoldedUnion(union.estimate, union.overlaps, union.boundaries, source, union.overlaps_told, nested)
+
+
+def _as_view(operand: Operand, part: PlacedPart) -> SessionView:
+    """An uploaded operand as a session keeps a view: its geometry and its places."""
+    geometry = view_of_part(operand.part)
+    values = np.asarray(operand.eigenvalues, dtype=np.float64)
+    return SessionView(operand.source, values, geometry, part.placement.position, Located.placed(part), ())
 
 
 def _located(models: SpectralModels, placed: list[PlacedPart], carried: list[Cover]) -> list[Located]:

@@ -36,18 +36,37 @@ async def session_state(store: SessionStore, models: SpectralModels, session_id:
     meta, views = await anyio.to_thread.run_sync(store.views, session_id, len(models.template.vertices))
     union = await anyio.to_thread.run_sync(store.cached_union, session_id, len(views), models.version)
     if union is None:
-        union = await _read_union(models, views, meta.registered, solve)
+        union = await read_union(models, views, meta.registered, solve)
         await anyio.to_thread.run_sync(store.cache_union, session_id, len(views), models.version, union)
     return SessionState(meta, views, union)
 
 
-async def _read_union(models: SpectralModels, views: list[SessionView], registered: bool, solve: Solve) -> SessionUnion:
+async def read_union(models: SpectralModels, views: list[SessionView], registered: bool, solve: Solve) -> SessionUnion:
     """The union as :func:`union_by` reads it; views too many of which cannot be aligned go
     through the chain."""
-    by, solved = union_by(len(views), registered, models.sessions), None
-    if by in ("fused", "aligned"):
-        geometry, places = [view.geometry for view in views], [view.places for view in views]
-        seen_with = None if models.body is None else str(models.directory)
-        solved = await solve(geometry, places, by == "fused", models.k, seen_with)
-        by = by if solved is not None else "learned-chain"
+    union = await views_union(models, views, registered, solve)
+    if union is not None:
+        return union
+    by = union_by(len(views), registered, models.sessions)
+    by = by if by in ("empty", "view") else "learned-chain"
+    return await anyio.to_thread.run_sync(session_union, models, views, by, None)
+
+
+async def views_union(
+    models: SpectralModels, views: list[SessionView], registered: bool, solve: Solve
+) -> SessionUnion | None:
+    """The union read from the views' geometry where :func:`union_by` reads it so (fused, or
+    aligned and fused, a few left out chained on), solved by ``solve``; None where the learned
+    chain reads it (one view, no calibration, a band the calibration gave the chain, or too many
+    views that would not align). The fused boundary is checked against the fitted body only
+    where every view's place is trusted (a doubted place would claim the wrong template)."""
+    by = union_by(len(views), registered, models.sessions)
+    if by not in ("fused", "aligned"):
+        return None
+    geometry, places = [view.geometry for view in views], [view.places for view in views]
+    trusted = all(view.located.trusted for view in views)
+    seen_with = str(models.directory) if models.body is not None and trusted else None
+    solved = await solve(geometry, places, by == "fused", models.k, seen_with)
+    if solved is None:
+        return None
     return await anyio.to_thread.run_sync(session_union, models, views, by, solved)

@@ -54,12 +54,14 @@ class SessionView:
 @dataclass(frozen=True)
 class SessionUnion:
     """The union of a session's views: the estimate and what made it; where the learned
-    operator made it, each step's overlap read on the template and whether it was told it."""
+    operator made it, each step's overlap and boundary share read on the template and whether
+    it was told them."""
 
     estimate: UnionEstimate
     union_by: UnionBy
     overlaps: list[float] = field(default_factory=list)
     overlaps_told: list[bool] = field(default_factory=list)
+    boundaries: list[float] = field(default_factory=list)
 
 
 def union_by(views: int, registered: bool, calibration: SessionCalibration | None) -> UnionBy:
@@ -126,7 +128,7 @@ def aligned_and_chained_sigma(chained: UnionEstimate, aligned: Bands, views: int
 def _chained(models: SpectralModels, values: list[np.ndarray], located: list[Located], by: UnionBy) -> SessionUnion:
     """The learned operator folded over ``values``, each step told what ``located`` says."""
     folded = folded_union(models, values, located, None, None, None)
-    return SessionUnion(folded.result, by, folded.overlaps, folded.told)
+    return SessionUnion(folded.result, by, folded.overlaps, folded.told, folded.boundaries)
 
 
 def session_cover(views: list[SessionView]) -> Cover | None:

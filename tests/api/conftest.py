@@ -6,6 +6,7 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
+from app.contract import SESSIONS_FILE
 from app.core.config import Settings
 from app.inference.manifest import write_manifest
 from app.main import create_app
@@ -38,4 +39,14 @@ def settings_without(tmp_path: Path, artefact: str) -> Settings:
 def client(tmp_path_factory):
     database = tmp_path_factory.mktemp("db") / "shapes.sqlite"
     with TestClient(create_app(settings_for(database))) as test_client:
+        yield test_client
+
+
+@pytest.fixture(scope="module")
+def chain_client(tmp_path_factory):
+    """A live app serving the models without the sessions' calibration: every union, of uploads
+    too, is the learned operator's fold, told what the uploads' places or footprints say (what a
+    models folder without ``sessions.json`` serves, and what a union of spectra always gets)."""
+    settings = settings_without(tmp_path_factory.mktemp("chain"), SESSIONS_FILE)
+    with TestClient(create_app(settings)) as test_client:
         yield test_client

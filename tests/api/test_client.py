@@ -65,12 +65,13 @@ def test_registered_views_sent_one_by_one_are_told_the_overlap_their_uploads_mea
     assert all(view.footprint.startswith("fp1.") for view in views)
     measured = service.overlap([view.footprint for view in views])
     together = service.union(files=scans, measure_overlap=True)
+    assert together.union_by == "fused" and together.overlaps_told == [False]  # fused, told to no operator
     assert measured.overlaps == pytest.approx(together.overlaps, abs=0.01)
     assert measured.boundaries == pytest.approx(together.boundaries, abs=0.02)
     spectra = [view.eigenvalues for view in views]
     told = service.union(spectra=spectra, overlap=measured.overlaps, boundary=measured.boundaries)
     assert told.overlaps == pytest.approx(measured.overlaps) and told.boundaries == pytest.approx(measured.boundaries)
-    np.testing.assert_allclose(told.eigenvalues, together.eigenvalues, rtol=0.02)
+    assert told.union_by == "learned-chain" and told.overlaps_told == [True]
     localized = service.localize(spectra=spectra, overlap=measured.overlaps, boundary=measured.boundaries)
     assert localized.eigenvalues == told.eigenvalues
 
@@ -142,7 +143,8 @@ def test_a_ball_with_a_hole_is_stored_and_retrieved_once_its_hole_is_capped(serv
 
 def test_scans_placed_once_are_united_as_spectra_with_their_regions(service, body_scans):
     """The client's correspondence and regions: two scans placed one by one, then sent back as
-    spectra with their region tokens, are localized and united as the uploads are."""
+    spectra with their region tokens, are localized where the uploads are; their union is the
+    learned operator's told what the regions say (spectra have no geometry to fuse)."""
     scans = body_scans
     placed = [service.correspondence(scan) for scan in scans]
     assert all(part.vertices == len(part.position) and part.places == "network" for part in placed)
@@ -153,9 +155,9 @@ def test_scans_placed_once_are_united_as_spectra_with_their_regions(service, bod
     by_spectra = service.localize(spectra=spectra, regions=regions)
     assert by_files.located_by == by_spectra.located_by == "correspondence"
     assert by_spectra.vertices == by_files.vertices
-    np.testing.assert_allclose(
-        service.union(spectra=spectra, regions=regions).eigenvalues, by_files.eigenvalues, rtol=1e-6
-    )
+    by_tokens = service.union(spectra=spectra, regions=regions)
+    assert by_tokens.union_by == "learned-chain" and by_tokens.overlaps_from == "correspondence"
+    np.testing.assert_allclose(by_tokens.eigenvalues, by_spectra.eigenvalues, rtol=1e-6)
 
 
 def test_a_session_filled_view_by_view_answers_as_the_union_of_its_views(service, scans):

@@ -138,16 +138,16 @@ def test_localize_of_uploads_is_the_union_of_their_regions(client, samples):
     assert by_spectrum["located_by"] == "spectrum" and by_spectrum["vertex_confidence"] is None
 
 
-def test_union_of_uploads_measures_its_overlap_and_a_told_one_wins(client, samples):
+def test_union_of_uploads_measures_its_overlap_and_a_told_one_wins(chain_client, samples):
     files = [("files", (name, data)) for name, data in samples.items()]
-    measured = client.post("/v1/union", files=files).json()
+    measured = chain_client.post("/v1/union", files=files).json()
     assert measured["overlaps_from"] == "correspondence"
     assert len(measured["overlaps"]) == 1 and 0.0 <= measured["overlaps"][0] <= 1.0
     assert len(measured["overlaps_told"]) == 1
-    told = client.post("/v1/union", files=files, params={"overlap": "0.25"}).json()
+    told = chain_client.post("/v1/union", files=files, params={"overlap": "0.25"}).json()
     assert told["overlaps_from"] == "told" and told["overlaps"] == [0.25] and told["overlaps_told"] == [True]
     spectra = json.dumps([operand["eigenvalues"] for operand in measured["operands"]])
-    untold = client.post("/v1/union", data={"spectra": spectra}).json()
+    untold = chain_client.post("/v1/union", data={"spectra": spectra}).json()
     assert untold["overlaps_from"] is None and untold["overlaps"] == []
 
 
@@ -243,17 +243,17 @@ def test_without_the_graph_the_service_answers_as_before(tmp_path, samples):
         assert client.post("/v1/union", files=files).json()["overlaps_from"] is None
 
 
-def test_spectra_sent_with_their_regions_are_placed_as_their_uploads(client, samples):
+def test_spectra_sent_with_their_regions_are_placed_as_their_uploads(chain_client, samples):
     """A session's parts sent back as spectra with the region tokens /v1/correspondence gave are
     localized and united exactly as the uploads are."""
-    placed = [_correspond(client, name, data).json() for name, data in samples.items()]
+    placed = [_correspond(chain_client, name, data).json() for name, data in samples.items()]
     form = {
         "spectra": json.dumps([part["eigenvalues"] for part in placed]),
         "regions": json.dumps([part["region"]["token"] for part in placed]),
     }
     files = [("files", (name, data)) for name, data in samples.items()]
-    by_files = client.post("/v1/localize", files=files).json()
-    by_spectra = client.post("/v1/localize", data=form).json()
+    by_files = chain_client.post("/v1/localize", files=files).json()
+    by_spectra = chain_client.post("/v1/localize", data=form).json()
     assert by_spectra["located_by"] == "correspondence" and by_spectra["vertices"] == by_files["vertices"]
     assert by_spectra["overlaps"] == pytest.approx(by_files["overlaps"])
     np.testing.assert_allclose(by_spectra["eigenvalues"], by_files["eigenvalues"], rtol=1e-6)
@@ -261,7 +261,7 @@ def test_spectra_sent_with_their_regions_are_placed_as_their_uploads(client, sam
     # the tokens carry each vertex's covered share in sixteenths: coverage within rounding
     assert by_spectra["part_coverage"] == pytest.approx(by_files["part_coverage"], abs=0.02)
     chained = {"spectra": json.dumps([by_spectra["eigenvalues"]]), "regions": json.dumps([by_spectra["region_token"]])}
-    again = client.post("/v1/localize", data=chained).json()
+    again = chain_client.post("/v1/localize", data=chained).json()
     assert again["vertices"] == by_files["vertices"]
     assert again["part_coverage"] == pytest.approx(by_files["part_coverage"], abs=0.02)
 
@@ -307,14 +307,14 @@ def test_a_token_is_read_only_beside_the_spectrum_it_was_issued_for(client, samp
 
 
 @pytest.mark.parametrize("tell_below", [0.0, 1.01])
-def test_a_measured_overlap_is_told_only_below_the_graphs_threshold(client, samples, tell_below):
+def test_a_measured_overlap_is_told_only_below_the_graphs_threshold(chain_client, samples, tell_below):
     """Below the threshold the union is the one told the measured shares; at or above it, the
     untold one (the shares still returned)."""
-    correspondence = client.app.state.resources.require_models().correspondence
+    correspondence = chain_client.app.state.resources.require_models().correspondence
     kept, correspondence.tell_below = correspondence.tell_below, tell_below
     try:
         files = [("files", (name, data)) for name, data in samples.items()]
-        measured = client.post("/v1/union", files=files).json()
+        measured = chain_client.post("/v1/union", files=files).json()
     finally:
         correspondence.tell_below = kept
     spectra = json.dumps([operand["eigenvalues"] for operand in measured["operands"]])
@@ -323,21 +323,21 @@ def test_a_measured_overlap_is_told_only_below_the_graphs_threshold(client, samp
     params = {"overlap": str(measured["overlaps"][0])} if told else {}
     if told and measured["boundaries"]:
         params["boundary"] = str(measured["boundaries"][0])
-    by_spectra = client.post("/v1/union", params=params, data={"spectra": spectra}).json()
+    by_spectra = chain_client.post("/v1/union", params=params, data={"spectra": spectra}).json()
     np.testing.assert_allclose(measured["eigenvalues"], by_spectra["eigenvalues"], rtol=1e-6)
 
 
 @pytest.mark.parametrize("nested_below", [0.0, 1.01])
-def test_a_part_twice_is_told_nested_only_below_the_graphs_confidence_threshold(client, samples, nested_below):
+def test_a_part_twice_is_told_nested_only_below_the_graphs_confidence_threshold(chain_client, samples, nested_below):
     """A part united with itself could lie inside itself (equal spectra); told nested where its
     place confidence is below the threshold (every confidence is below 1.01), the union is the
     one told overlap 1, and the part itself (idempotence); the measured shares are still
     returned."""
-    correspondence = client.app.state.resources.require_models().correspondence
+    correspondence = chain_client.app.state.resources.require_models().correspondence
     kept, correspondence.nested_below = correspondence.nested_below, nested_below
     name = "no_head_neck.ply"
     try:
-        twice = client.post("/v1/union", files=[("files", (name, samples[name]))] * 2).json()
+        twice = chain_client.post("/v1/union", files=[("files", (name, samples[name]))] * 2).json()
     finally:
         correspondence.nested_below = kept
     nested = nested_below > 1
@@ -346,7 +346,7 @@ def test_a_part_twice_is_told_nested_only_below_the_graphs_confidence_threshold(
     if nested:
         spectra = json.dumps([operand["eigenvalues"] for operand in twice["operands"]])
         params = {"overlap": "1"} | ({"boundary": str(twice["boundaries"][0])} if twice["boundaries"] else {})
-        by_spectra = client.post("/v1/union", params=params, data={"spectra": spectra}).json()
+        by_spectra = chain_client.post("/v1/union", params=params, data={"spectra": spectra}).json()
         np.testing.assert_allclose(twice["eigenvalues"], by_spectra["eigenvalues"], rtol=1e-6)
         part = np.asarray(twice["operands"][0]["eigenvalues"])
         np.testing.assert_allclose(twice["eigenvalues"], part, rtol=1e-5)
@@ -362,15 +362,15 @@ def test_one_upload_is_placed_only_where_its_region_is_answered(client, samples)
     assert client.post("/v1/localize", files=one).json()["located_by"] == "correspondence"
 
 
-def test_an_upload_beside_a_spectrum_sent_with_its_region_is_placed_as_both_uploads(client, samples):
+def test_an_upload_beside_a_spectrum_sent_with_its_region_is_placed_as_both_uploads(chain_client, samples):
     """A session's next scan uploaded beside the earlier one's spectrum and region token: the same
     region and union as both uploaded together."""
     (first, data_a), (second, data_b) = samples.items()
-    earlier = _correspond(client, second, data_b).json()
+    earlier = _correspond(chain_client, second, data_b).json()
     form = {"spectra": json.dumps([earlier["eigenvalues"]]), "regions": json.dumps([earlier["region"]["token"]])}
-    mixed = client.post("/v1/localize", files=[("files", (first, data_a))], data=form)
+    mixed = chain_client.post("/v1/localize", files=[("files", (first, data_a))], data=form)
     assert mixed.status_code == 200, mixed.text
-    both = client.post("/v1/localize", files=[("files", (name, data)) for name, data in samples.items()]).json()
+    both = chain_client.post("/v1/localize", files=[("files", (name, data)) for name, data in samples.items()]).json()
     assert mixed.json()["located_by"] == "correspondence" and mixed.json()["vertices"] == both["vertices"]
     assert mixed.json()["overlaps"] == pytest.approx(both["overlaps"])
     np.testing.assert_allclose(mixed.json()["eigenvalues"], both["eigenvalues"], rtol=1e-6)
@@ -383,15 +383,15 @@ class _NoGraphHere:
         raise AssertionError("the correspondence graph ran in the API process")
 
 
-def test_uploads_are_placed_in_the_solver_worker_not_the_api_process(client, samples, monkeypatch):
+def test_uploads_are_placed_in_the_solver_worker_not_the_api_process(chain_client, samples, monkeypatch):
     """The graph's memory and time fall under a solver worker's cap and deadline: with the API
     process's own graph unusable, a part is still placed, and a union of two still measured."""
-    monkeypatch.setattr(client.app.state.resources.require_models().correspondence, "graph", _NoGraphHere())
+    monkeypatch.setattr(chain_client.app.state.resources.require_models().correspondence, "graph", _NoGraphHere())
     name = "no_head_neck.ply"
-    placed = _correspond(client, name, samples[name])
+    placed = _correspond(chain_client, name, samples[name])
     assert placed.status_code == 200, placed.text
     files = [("files", (n, samples[n])) for n in PARTS]
-    united = client.post("/v1/union", files=files)
+    united = chain_client.post("/v1/union", files=files)
     assert united.status_code == 200, united.text
     assert united.json()["overlaps_from"] == "correspondence"
 

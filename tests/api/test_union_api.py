@@ -7,11 +7,13 @@ import numpy as np
 import pytest
 import trimesh
 
+from app.contract import SESSIONS_FILE
 from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
 from app.geometry.topology import drop_unreferenced
 from app.inference.template import PART_NAMES, Template
+from app.sessions.calibration import SessionCalibration
 
 PROBLEM = "application/problem+json"
 LEGS = ("left_thigh", "right_thigh", "left_shin", "right_shin", "left_foot", "right_foot")
@@ -243,3 +245,32 @@ def test_a_localized_union_holds_each_operand_s_own_region(client, parts, templa
     # Not the whole body, so the holding is not vacuous; here the parts add to the union's own
     # region (measured: 9 986 → 10 022 vertices of 12 167).
     assert len(union_alone) < len(both) < len(template.vertices)
+
+
+def test_a_union_of_uploads_is_read_from_their_geometry(client, template):
+    """Every operand an upload: the union is read from the uploads themselves, as a session reads
+    its views. The template without its legs and the template without head and neck cover the
+    whole body between them, so their union is the closed body: registered (one frame, one
+    pose) they are fused and solved once, in either order one answer; in frames of their own they
+    are aligned through their places first, or folded where the calibration chose the chain;
+    their spectra alone are folded by the learned operator."""
+    closed = mesh_spectrum(Mesh(template.vertices, template.faces), SpectrumOptions(k=20)).eigenvalues
+
+    def error(values: list[float]) -> float:  # mean relative error past λ₁ = 0; a point cloud's floor is ~3 %
+        return float((np.abs(np.array(values) - closed) / closed)[1:].mean())
+
+    meshes = [region(template, LEGS), region(template, ("head", "neck"))]
+    files = [("files", (f"part{i}.ply", ply_bytes(mesh))) for i, mesh in enumerate(meshes)]
+    fused = client.post("/v1/union", params={"measure_overlap": "true"}, files=files).json()
+    assert fused["union_by"] == "fused"
+    assert fused["eigenvalues"][0] < 1e-6 and fused["sigma"][1] > 0  # closed: λ₁ = 0, as the body's
+    assert error(fused["eigenvalues"]) < 0.04
+    backward = client.post("/v1/union", params={"measure_overlap": "true"}, files=files[::-1]).json()
+    assert backward["eigenvalues"] == fused["eigenvalues"]
+    own_frames = client.post("/v1/union", files=files).json()
+    reading = SessionCalibration.load(Settings().models_dir / SESSIONS_FILE, 20).unregistered_by(2)
+    assert own_frames["union_by"] == reading
+    if reading == "aligned":
+        assert error(own_frames["eigenvalues"]) < 0.04
+    spectra = [operand["eigenvalues"] for operand in fused["operands"]]
+    assert union(client, spectra).json()["union_by"] == "learned-chain"

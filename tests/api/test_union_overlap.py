@@ -196,10 +196,11 @@ def test_told_that_one_part_is_inside_the_other_the_union_is_the_larger_part(cli
     assert error(told) <= 0.03 and error(told) * 4 <= error(untold)
 
 
-def test_uploads_in_one_frame_have_their_overlap_measured(client, template):  # noqa: F811
+def test_uploads_in_one_frame_have_their_overlap_measured(client, chain_client, template):  # noqa: F811
     """The README's two sample parts (the template less head and neck, less left forearm and hand):
-    the measured share is their true one from the template's faces, and the union is the one told
-    that share."""
+    the measured share is their true one from the template's faces; the uploads are fused, told
+    to no operator, and their union is the closed body; without the sessions' calibration the
+    fold is the one told that share."""
     files = [("files", (name, template_part(template, removed))) for name, removed in SAMPLE_PARTS.items()]
     measured = client.post("/v1/union", params={"measure_overlap": "true"}, files=files)
     assert measured.status_code == 200, measured.text
@@ -207,9 +208,18 @@ def test_uploads_in_one_frame_have_their_overlap_measured(client, template):  # 
     assert share == pytest.approx(sample_overlap(template), abs=0.02)
     (boundary,) = measured.json()["boundaries"]
     assert boundary <= 0.02  # their union is the closed body: each part's edge lies inside the other
+    assert measured.json()["union_by"] == "fused" and measured.json()["overlaps_told"] == [False]
+    body = np.array(spectrum(region(template, ())))
+
+    def error(values: list[float]) -> float:  # λ₁ of the closed body is 0
+        return float((np.abs(np.array(values) - body) / body)[1:].mean())
+
     spectra = [operand["eigenvalues"] for operand in measured.json()["operands"]]
     told = union(client, spectra, [share], [boundary]).json()
-    np.testing.assert_allclose(measured.json()["eigenvalues"], told["eigenvalues"], rtol=1e-5)
+    folded = chain_client.post("/v1/union", params={"measure_overlap": "true"}, files=files).json()
+    assert error(measured.json()["eigenvalues"]) < min(0.04, error(folded["eigenvalues"]))
+    assert folded["union_by"] == "learned-chain" and folded["overlaps"] == pytest.approx([share])
+    np.testing.assert_allclose(folded["eigenvalues"], told["eigenvalues"], rtol=1e-5)
     assert told["overlaps"] == pytest.approx([share]) and told["boundaries"] == pytest.approx([boundary])
     assert union(client, spectra).json()["overlaps"] == [] and union(client, spectra).json()["boundaries"] == []
 
@@ -249,21 +259,25 @@ def measured(client, tokens: list[str]):
     return client.post("/v1/overlap", files={"footprints": (None, json.dumps(tokens))})
 
 
-def test_views_sent_one_by_one_have_the_overlap_the_uploads_together_have(client, template):  # noqa: F811
+def test_views_sent_one_by_one_have_the_overlap_the_uploads_together_have(
+    client,
+    chain_client,
+    template,  # noqa: F811
+):
     """The README's two sample parts posted one at a time: their tokens (each part thinned from
     ~10 000 vertices to 4 096 points) measure about the share that measure_overlap measures on
-    the two uploads and the template's faces give (0.923, 0.941 and 0.9405 measured), and a
-    boundary share of about 0 (their union is the closed body: each part's edge lies inside the
-    other; measured 0.000 from both). Told both, the union is as close to the truth, the whole
-    body, as measured from the uploads (λ₂…λ₂₀ 10.9 and 11.4 % off), and closer than told the
-    share alone (21.7 %: two parts whose union closes the surface are what the boundary share
-    tells; untold 8.2 %, which the README says)."""
+    the two uploads and the template's faces give, and a boundary share of about 0 (their union
+    is the closed body: each part's edge lies inside the other). Told both, the learned union is
+    as close to the truth, the whole body, as the fold measured from the uploads, and closer than
+    told the share alone (two parts whose union closes the surface are what the boundary share
+    tells); the uploads fused are closer than either."""
     uploads = [(name, template_part(template, removed)) for name, removed in SAMPLE_PARTS.items()]
     views = [footprinted(client, name, upload) for name, upload in uploads]
     answer = measured(client, [v["footprint"] for v in views])
     assert answer.status_code == 200, answer.text
     (share,), (boundary,) = answer.json()["overlaps"], answer.json()["boundaries"]
-    together = client.post("/v1/union", params={"measure_overlap": "true"}, files=[("files", u) for u in uploads])
+    files = [("files", u) for u in uploads]
+    together = chain_client.post("/v1/union", params={"measure_overlap": "true"}, files=files)
     assert share == pytest.approx(together.json()["overlaps"][0], abs=0.03)
     assert share == pytest.approx(sample_overlap(template), abs=0.03)
     assert boundary == pytest.approx(together.json()["boundaries"][0], abs=0.02) and boundary <= 0.02
@@ -276,6 +290,8 @@ def test_views_sent_one_by_one_have_the_overlap_the_uploads_together_have(client
     both = error(union(client, spectra, [share], [boundary]).json()["eigenvalues"])
     assert both <= error(together.json()["eigenvalues"]) + 0.01
     assert both < error(union(client, spectra, [share]).json()["eigenvalues"])
+    fused = client.post("/v1/union", params={"measure_overlap": "true"}, files=files).json()
+    assert fused["union_by"] == "fused" and error(fused["eigenvalues"]) < both
 
 
 def test_a_session_measured_view_by_view_through_the_union_token_is_the_fold(client, template):  # noqa: F811
