@@ -12,7 +12,7 @@ the spectrum of the union of the views' template masks, solved by the service's 
 
 - ``min``: the elementwise minimum of the views' spectra (the trivial union);
 - ``chain``: the served learned operator folded view by view, overlaps read from the views'
-  places on the template (what ``/v1/union`` answers for unregistered uploads);
+  places on the template (what ``/v1/union`` answers for spectra sent with their region tokens);
 - ``chain told``: the same, told each step's overlap measured from the registered views'
   footprints (``measure_overlap=true``);
 - ``fused``: the registered views fused into one cloud and solved once, its boundary checked
