@@ -175,7 +175,8 @@ def session_pair_row(metrics: dict) -> Row:
     session = metrics["pairs"]["sets"]["pairs_c"]["all"]
     gap = worst_served_gap(metrics)
     return (
-        "a session's two views: overlap error; union as served (told the truth; worst kind's or stratum's gap)",
+        "a session's two views as spectra with region tokens: overlap error; union (told the truth; "
+        "worst kind's or stratum's gap)",
         f"{session['overlap_error']:.3f}; {percent(session['served'])} ({percent(session['told_truth'])}; "
         f"{100 * gap:.1f} points)",
         "≤ 0.08; within 1 point of told the truth, every kind, stratum and Test B",

@@ -18,7 +18,7 @@ from app.sessions.session import aligned_and_chained_sigma
 from training.sessions.reading import Read, read_prefixes, session_views
 from training.sessions.scans import VARIANTS, relative_error, test_c_people
 
-LENGTHS = (3, 6, 12, 24, 32)
+LENGTHS = (2, 3, 6, 12, 24, 32)
 METHODS = ("elementwise_min", "learned_chain", "unregistered", "registered")
 TEST_C_STREAM = 11  # the random frames Test C's views are sent in
 
