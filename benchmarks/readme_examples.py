@@ -151,10 +151,10 @@ def examples(overlap: float) -> list[Example]:
     session_fields = ("union_by", "eigenvalues", "sigma", "area_fraction", "part_coverage", "least_covered", "warnings")
     return [
         Example(f"curl -s -F file=@no_head_neck.ply '{URL}/v1/spectrum?units=m'", record="spectrum", tour=True),
-        Example(f"curl -s {both} {URL}/v1/union", record="union", tour=True),
+        Example(f"curl -s {both} {URL}/v1/union", tour=True),
         Example(f'curl -s -F "spectra=$(cat spectra.json)" {URL}/v1/union', tour=True),
         Example(f"curl -s -F \"spectra=$(cat spectra.json)\" '{URL}/v1/union?overlap={overlap}'"),
-        Example(f"curl -s {both} '{URL}/v1/union?measure_overlap=true'"),
+        Example(f"curl -s {both} '{URL}/v1/union?measure_overlap=true'", record="union"),  # every field set
         Example(
             f"curl -s -F file=@no_head_neck.ply {footprint} | tee view0.json",
             fields("eigenvalues", "area_m2", "footprint"),

@@ -92,6 +92,10 @@ def test_documented_error_examples_are_the_messages_the_service_sends(tmp_path):
 
 
 def test_every_json_answer_has_a_success_example_that_its_model_accepts():
+    """Each route's recorded answer (``app/api/examples.json``) is one its response model accepts,
+    with every field, and the OpenAPI page shows it (less its nulls, which FastAPI leaves out of
+    the page)."""
+    from app.api.examples import EXAMPLES_FILE
     from app.api.responses import UnionResponse
     from app.api.routes.correspondence import CorrespondenceResponse
     from app.api.routes.localize import LocalizeResponse
@@ -103,19 +107,31 @@ def test_every_json_answer_has_a_success_example_that_its_model_accepts():
     from app.geometry.pipeline import SpectrumReport
 
     models = {
-        ("post", "/v1/spectrum", "200"): SpectrumReport,
-        ("post", "/v1/union", "200"): UnionResponse,
-        ("post", "/v1/correspondence", "200"): CorrespondenceResponse,
-        ("post", "/v1/overlap", "200"): OverlapResponse,
-        ("post", "/v1/localize", "200"): LocalizeResponse,
-        ("post", "/v1/reconstruct", "200"): ReconstructResponse,
-        ("post", "/v1/retrieve", "200"): RetrieveResponse,
-        ("post", "/v1/shapes", "201"): AddedShape,
-        ("get", "/v1/shapes", "200"): ShapePage,
-        ("get", "/v1/models", "200"): ModelsResponse,
+        ("post", "/v1/spectrum", "200"): ("spectrum", SpectrumReport),
+        ("post", "/v1/union", "200"): ("union", UnionResponse),
+        ("post", "/v1/correspondence", "200"): ("correspondence", CorrespondenceResponse),
+        ("post", "/v1/overlap", "200"): ("overlap", OverlapResponse),
+        ("post", "/v1/localize", "200"): ("localize", LocalizeResponse),
+        ("post", "/v1/reconstruct", "200"): ("reconstruct", ReconstructResponse),
+        ("post", "/v1/retrieve", "200"): ("retrieve", RetrieveResponse),
+        ("post", "/v1/shapes", "201"): ("add_shape", AddedShape),
+        ("get", "/v1/shapes", "200"): ("list_shapes", ShapePage),
+        ("get", "/v1/models", "200"): ("models", ModelsResponse),
     }
+    recorded = json.loads(EXAMPLES_FILE.read_text())
     paths = create_app().openapi()["paths"]
-    for (method, path, status), model in models.items():
-        example = paths[path][method]["responses"][status]["content"]["application/json"]["example"]
+    for (method, path, status), (name, model) in models.items():
+        example = recorded[name]
         TypeAdapter(model).validate_python(example, strict=False)
         assert set(example) == set(TypeAdapter(model).json_schema()["properties"]), path
+        shown = paths[path][method]["responses"][status]["content"]["application/json"]["example"]
+        assert shown == without_nulls(example), path
+
+
+def without_nulls(value):
+    """``value`` as FastAPI writes it into the OpenAPI page: null fields left out, at every depth."""
+    if isinstance(value, dict):
+        return {key: without_nulls(item) for key, item in value.items() if item is not None}
+    if isinstance(value, list):
+        return [without_nulls(item) for item in value]
+    return value
