@@ -42,9 +42,8 @@ from app.inference.models import (
 )
 from app.inference.region_tokens import RegionTokens
 from app.sessions.chain import FoldedUnion, Located, OverlapSource, folded_union
-from app.sessions.fused import view_of_part
 from app.sessions.reading import views_union
-from app.sessions.session import SessionUnion, SessionView
+from app.sessions.session import SessionUnion, placed_view
 
 
 @dataclass(frozen=True)
@@ -135,13 +134,14 @@ async def union_of_operands(
     started = time.perf_counter()
     union, by = None, "operand" if len(operands) == 1 else "learned-chain"
     if overlaps is None and boundaries is None and len(placed) == len(operands) > 1:  # every operand an upload
-        views = [_as_view(operand, part) for operand, part in zip(operands, placed, strict=True)]
+        views = [placed_view(o.source, o.eigenvalues, o.part, part) for o, part in zip(operands, placed, strict=True)]
         union = await views_union(models, views, told.measure, request.app.state.solver.session_union)
     if union is not None:
         measured = await _measured(operands) if told.measure else None
         fold, by = _as_folded(union, measured), union.union_by
     else:
-        fold = await _folded(models, operands, placed, carried or [], covers, overlaps, boundaries, told.measure)
+        located = None if covers is None else _located(models, placed, carried or [])
+        fold = await _folded(models, operands, values, located, overlaps, boundaries, told.measure)
     seconds = time.perf_counter() - started
     INFERENCE.labels("union").observe(seconds)
     return UnionOutcome(
@@ -164,22 +164,19 @@ async def union_of_operands(
 async def _folded(
     models: SpectralModels,
     operands: list[Operand],
-    placed: list[PlacedPart],
-    carried: list[Cover],
-    covers: list[Cover] | None,
+    values: list[np.ndarray],
+    located: list[Located] | None,
     overlaps: list[float] | None,
     boundaries: list[float] | None,
     measure: bool,
 ) -> FoldedUnion:
-    """The learned operator folded over the operands' spectra: told what the client told, what
-    the registered uploads' footprints measure, or what their places say."""
+    """The learned operator folded over the operands' spectra (``values``): told what the client
+    told, what the registered uploads' footprints measure, or where ``located`` puts them."""
     source: OverlapSource | None = "told" if overlaps is not None else None
     if measure:
         fold = await _measured(operands)
         overlaps, boundaries = fold.overlaps, fold.boundaries if models.reads_boundary else None
         source = "footprints"
-    located = None if covers is None else _located(models, placed, carried)
-    values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
     return await anyio.to_thread.run_sync(folded_union, models, values, located, overlaps, boundaries, source)
 
 
@@ -200,13 +197,6 @@ def _as_folded(union: SessionUnion, measured: MeasuredFold | None) -> FoldedUnio
     source = "correspondence" if union.overlaps else None
     nested = list(union.estimate.nested)
     return FoldedUnion(union.estimate, union.overlaps, union.boundaries, source, union.overlaps_told, nested)
-
-
-def _as_view(operand: Operand, part: PlacedPart) -> SessionView:
-    """An uploaded operand as a session keeps a view: its geometry and its places."""
-    geometry = view_of_part(operand.part)
-    values = np.asarray(operand.eigenvalues, dtype=np.float64)
-    return SessionView(operand.source, values, geometry, part.placement.position, Located.placed(part), ())
 
 
 def _located(models: SpectralModels, placed: list[PlacedPart], carried: list[Cover]) -> list[Located]:

@@ -15,6 +15,7 @@ free it, and where the session saw too little for a body, or no body fits, nothi
 """
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +24,7 @@ from scipy.sparse.linalg import splu
 from scipy.spatial import cKDTree
 
 from app.contract import BODY_FILE
+from app.geometry.topology import half_edges
 from app.inference.bodyfit import BodyBasis, NotEnoughSeen
 from app.inference.template import Template
 from app.sessions.body import NoBodyFits, fitted_views
@@ -48,8 +50,9 @@ class SeenTemplate:
     def of(cls, basis: BodyBasis, template: Template) -> "SeenTemplate":
         return cls(basis, template.vertices, _vertex_graph(template.faces))
 
-    @property
+    @cached_property
     def degree(self) -> np.ndarray:
+        """(V,) each vertex's neighbour count, read once: every round of the check needs it."""
         return np.asarray(self.graph.sum(axis=1)).ravel()
 
 
@@ -125,7 +128,7 @@ def _eroded(seen: SeenTemplate, region: np.ndarray, rings: int) -> np.ndarray:
 def _vertex_graph(faces: np.ndarray) -> sp.csr_matrix:
     """(V, V) the template's edges, both ways, ones."""
     count = int(faces.max()) + 1
-    pairs = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    pairs = half_edges(faces)
     graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count)).tocsr()
     graph = ((graph + graph.T) > 0).astype(np.float64)
     return graph.tocsr()

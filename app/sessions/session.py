@@ -25,6 +25,7 @@ from typing import Literal
 import numpy as np
 
 from app.geometry.pipeline import Solved
+from app.geometry.placing import Part
 from app.inference.correspondence import PlacedPart
 from app.inference.cover import Cover, united
 from app.inference.models import SpectralModels, UnionEstimate
@@ -153,6 +154,13 @@ def session_view(source: str, solved: Solved, placed: PlacedPart, doubts: list[s
     """An upload solved and placed (its part kept: the geometry the spectrum was solved on) as
     the view a session keeps; ``doubts``: what the placing found too uncertain to trust."""
     warnings = tuple(solved.report.warnings) + tuple(doubts)
-    values = np.asarray(solved.report.eigenvalues, dtype=np.float64)
-    geometry, places = view_of_part(solved.part), placed.placement.position
-    return SessionView(source, values, geometry, places, Located.placed(placed), warnings)
+    return placed_view(source, solved.report.eigenvalues, solved.part, placed, warnings)
+
+
+def placed_view(
+    source: str, eigenvalues: list[float], part: Part, placed: PlacedPart, warnings: tuple[str, ...] = ()
+) -> SessionView:
+    """A part with its spectrum and its places as the view a session keeps (a union route's
+    uploads are read as one)."""
+    values = np.asarray(eigenvalues, dtype=np.float64)
+    return SessionView(source, values, view_of_part(part), placed.placement.position, Located.placed(placed), warnings)
