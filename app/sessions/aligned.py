@@ -14,7 +14,7 @@ left out hold at most :data:`MAX_LEFT_SHARE` of the area (the caller chains them
 with the learned operator); beyond it the caller reads the session through the learned operator.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -99,9 +99,7 @@ def joined_views(views: list[View], places: list[np.ndarray]) -> Joined:
         else:  # none of the views left comes together with those joined
             break
     indices = sorted(moved)
-    return Joined(
-        [View(moved[i](views[i].points), views[i].mass, views[i].boundary, views[i].edges) for i in indices], indices
-    )
+    return Joined([replace(views[i], points=moved[i](views[i].points)) for i in indices], indices)
 
 
 def aligned_views(views: list[View], places: list[np.ndarray]) -> list[View] | None:

@@ -20,6 +20,11 @@ pin-holes: without it, the gaps views leave between them pin a nearly closed uni
 every eigenvalue comes out too high. A few boundary points that make no curve with any other
 are freed for the same reason. What the views' geometry cannot tell (whether a seam a face wide
 between two views is covered), another reading can (``inside``: :mod:`app.sessions.seen`).
+
+A view whose every point lies on another view adds nothing and goes first (a re-scan, a close-up,
+a part sent with its re-meshed copy: the union is the other view, exactly). Where every view is
+a mesh, the spectrum is solved on the views glued through their own triangles
+(:mod:`app.sessions.seams`), not on the points.
 """
 
 from collections.abc import Callable
@@ -35,6 +40,7 @@ from app.geometry.pipeline import SpectrumOptions, cloud_spectrum
 from app.geometry.placing import Part
 from app.geometry.shapes import PointCloud
 from app.geometry.topology import boundary_half_edges
+from app.sessions.seams import Seams, cap_fans, glued_spectrum, welded_faces
 
 MIN_TOLERANCE_M = 0.003  # a few mm: one scanner's registered views rarely agree better
 BRIDGE = 0.9  # of the coarser local spacing: two views' loose ends this near, facing, are one seam
@@ -44,6 +50,7 @@ MEET = 2.0  # of the coarser local spacing: two views' loose ends this near are 
 FARTHEST = max(1.0, BRIDGE, MEET)  # the farthest any rule looks
 FRAGMENT_POINTS = 4  # boundary points fewer than this, joined to no other, are no boundary
 FRAGMENT_REACH = 3.0  # of the local spacing: how near two boundary points are to be one curve
+COVERED_SHARE = 0.001  # of a view's area: a view with no more than this off every other view adds nothing
 
 
 @dataclass(frozen=True)
@@ -51,22 +58,26 @@ class View:
     """One view's surface in the session's frame: ``points`` (n, 3) metres, ``mass`` (n,) the
     lumped area of each (m²), ``boundary`` (n,) its boundary points, ``edges`` (e, 2) the
     boundary edges joining them (a mesh's boundary half-edges; for a point cloud, each boundary
-    point to its nearest boundary neighbours)."""
+    point to its nearest boundary neighbours), ``faces`` (m, 3) a mesh's triangles (None for a
+    point cloud)."""
 
     points: np.ndarray
     mass: np.ndarray
     boundary: np.ndarray
     edges: np.ndarray
+    faces: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
 class FusedCloud:
-    """The union as one point cloud: ``points`` (n, 3), ``boundary`` (n,) held at zero, and how
-    many pin-holes between views were capped."""
+    """The union as one point cloud: ``points`` (n, 3), ``boundary`` (n,) held at zero, how
+    many pin-holes between views were capped, and where every view is a mesh the views' triangles
+    glued over the points (:mod:`app.sessions.seams`; None otherwise)."""
 
     points: np.ndarray
     boundary: np.ndarray
     capped: int
+    faces: np.ndarray | None = None
 
     def freed(self, inside: np.ndarray) -> "FusedCloud":
         """The cloud with the boundary points ``inside`` (n,) freed, and the fragments that
@@ -116,10 +127,13 @@ class _Pair:
 def fused_cloud(views: list[View]) -> FusedCloud:
     """The union of ``views`` (one frame): each surface point once (the larger view's where two
     cover it), its boundary where a view stops and no other's inside goes on, the pin-holes
-    between views capped. Costs a k-d tree query per pair of views."""
-    views = [views[i] for i in canonical_order(views)]
+    between views capped; a view another holds whole left out first. Costs a k-d tree query per
+    pair of views."""
     trees = [cKDTree(view.points) for view in views]
     reaches = [_reach(tree) for tree in trees]
+    gone = set(covered_views(views, trees, reaches))
+    order = [i for i in canonical_order(views) if i not in gone]
+    views, trees, reaches = [views[i] for i in order], [trees[i] for i in order], [reaches[i] for i in order]
     pairs = {
         (i, j): _Pair.of(view, reaches[i], trees[j], reaches[j])
         for i, view in enumerate(views)
@@ -127,21 +141,50 @@ def fused_cloud(views: list[View]) -> FusedCloud:
         if i != j
     }
     kept = [np.ones(len(view.points), bool) for view in views]
+    under = [np.zeros(len(view.points), bool) for view in views]  # on an earlier view's inside
     loose = [view.boundary.copy() for view in views]  # boundary points no other view's inside covers
     for (i, j), pair in pairs.items():
         inside = pair.near() & ~views[j].boundary[pair.nearest]
         if j < i:  # a larger view's inside, or one of its points, is already there
             kept[i] &= ~(inside | pair.near(DUPLICATE, nearer=True))
+            under[i] |= inside
         loose[i] &= ~inside
-    _bridge(views, trees, pairs, loose)
-    pinholes, centres = _pinholes(views, pairs, loose, kept)
-    points, boundary = [], []
-    for view, keep, edge, hole in zip(views, kept, loose, pinholes, strict=True):
+    seamed = _bridge(views, trees, pairs, loose)
+    pinholes, loops = _pinholes(views, pairs, loose, kept)
+    centres = np.array([loop.mean(axis=0) for loop in loops], dtype=np.float64).reshape(-1, 3)
+    points, boundary, labels = [], [], []
+    for index, (view, keep, edge, hole) in enumerate(zip(views, kept, loose, pinholes, strict=True)):
         points.append(view.points[keep])
         boundary.append((edge & ~hole)[keep])
+        labels.append(np.full(int(keep.sum()), index))
     cloud, flags = np.concatenate(points + [centres]), np.concatenate(boundary + [np.zeros(len(centres), bool)])
     flags |= _edges_of_dropped(views, kept, loose, pinholes, cloud)
-    return FusedCloud(cloud, _without_fragments(cloud, flags), len(centres))
+    faces = None
+    if all(view.faces is not None for view in views):
+        seams = [Seams(v.faces, k, u, ~k | s) for v, k, u, s in zip(views, kept, under, seamed, strict=True)]
+        labels = np.concatenate(labels + [np.full(len(centres), -1)])
+        glued = welded_faces([view.points for view in views], seams, cloud, labels)
+        rings = [cKDTree(cloud).query(loop)[1] for loop in loops]
+        faces = np.concatenate([glued, cap_fans(cloud, rings, centres, len(cloud) - len(centres))])
+    return FusedCloud(cloud, _without_fragments(cloud, flags), len(centres), faces)
+
+
+def covered_views(views: list[View], trees: list[cKDTree], reaches: list[np.ndarray]) -> list[int]:
+    """The views another view holds whole (all but COVERED_SHARE of their area on its inside, or
+    on its boundary points themselves), which add nothing to the union. Of views that hold each other (a part
+    and its re-meshed copy) the one with more points stays: the finer mesh is the truer."""
+    gone: list[int] = []
+    for i in sorted(range(len(views)), key=lambda i: (len(views[i].points), float(views[i].mass.sum()))):
+        view = views[i]
+        for j in range(len(views)):
+            if j == i or j in gone:
+                continue
+            pair = _Pair.of(view, reaches[i], trees[j], reaches[j])
+            off = ~(pair.near() & ~views[j].boundary[pair.nearest]) & ~pair.near(DUPLICATE, nearer=True)
+            if float(view.mass[off].sum()) <= COVERED_SHARE * float(view.mass.sum()):
+                gone.append(i)
+                break
+    return gone
 
 
 def _without_fragments(points: np.ndarray, flags: np.ndarray) -> np.ndarray:
@@ -174,24 +217,29 @@ def _inward(view: View, tree: cKDTree, points: np.ndarray) -> np.ndarray:
 
 def _bridge(
     views: list[View], trees: list[cKDTree], pairs: dict[tuple[int, int], _Pair], loose: list[np.ndarray]
-) -> None:
+) -> list[np.ndarray]:
     """Two views that stop side by side, facing each other across less than a spacing, join
     there (the gap between them is a seam, not a boundary): their loose points that meet a loose
     point of the other view going the other way are no longer loose. Two views that stop at one
-    place on the same side (a re-scan) keep that boundary."""
+    place on the same side (a re-scan) keep that boundary. Returns, for each view, its points so
+    joined to an earlier view's (where glued, welded onto them)."""
     inward = [np.zeros((len(view.points), 3)) for view in views]
     for view, tree, edge, direction in zip(views, trees, loose, inward, strict=True):
         if edge.any():
             direction[edge] = _inward(view, tree, view.points[edge])
     joined = [np.zeros(len(view.points), bool) for view in views]
+    earlier = [np.zeros(len(view.points), bool) for view in views]
     for (i, j), pair in pairs.items():
         if not loose[i].any() or not loose[j].any():
             continue
         meets = loose[i] & pair.near(BRIDGE) & loose[j][pair.nearest]
         facing = np.einsum("ij,ij->i", inward[i][meets], inward[j][pair.nearest[meets]]) < 0
         joined[i][np.flatnonzero(meets)[facing]] = True
+        if j < i:
+            earlier[i][np.flatnonzero(meets)[facing]] = True
     for edge, join in zip(loose, joined, strict=True):
         edge &= ~join
+    return earlier
 
 
 def canonical_order(views: list[View]) -> list[int]:
@@ -204,10 +252,10 @@ def canonical_order(views: list[View]) -> list[int]:
 
 def _pinholes(
     views: list[View], pairs: dict[tuple[int, int], _Pair], loose: list[np.ndarray], kept: list[np.ndarray]
-) -> tuple[list[np.ndarray], np.ndarray]:
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Which loose boundary points lie on a pin-hole between views (a closed loop of at most
     MAX_HOLE_EDGES of the views' boundary edges, each stretch counted once: by the points the
-    union keeps), and each such hole's centre."""
+    union keeps), and each such hole's points (n, 3)."""
     offsets = np.cumsum([0] + [len(view.points) for view in views])
     rows, cols, lengths = [], [], np.zeros(offsets[-1])
     for i, view in enumerate(views):
@@ -239,9 +287,9 @@ def _pinholes(
     small = (loop_points > 0) & (open_ends == 0) & (loop_length <= MAX_HOLE_EDGES * spacing)
     hole = on_loop & small[label]
     everything = np.concatenate([view.points for view in views])
-    centres = [everything[hole & (label == loop)].mean(axis=0) for loop in np.unique(label[hole])]
+    loops = [everything[hole & (label == loop)] for loop in np.unique(label[hole])]
     split = [hole[offsets[i] : offsets[i + 1]] for i in range(len(views))]
-    return split, np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    return split, loops
 
 
 def _edge_length(view: View) -> float:
@@ -268,6 +316,7 @@ def view_of(points: np.ndarray, mass: np.ndarray, boundary: np.ndarray, faces: n
     each boundary point to its two nearest boundary neighbours (a boundary is a curve)."""
     if faces is not None:
         edges = boundary_half_edges(faces)
+        faces = np.asarray(faces, np.int64)
     else:
         ends = np.flatnonzero(boundary)
         if len(ends) > 2:
@@ -275,7 +324,7 @@ def view_of(points: np.ndarray, mass: np.ndarray, boundary: np.ndarray, faces: n
             edges = np.column_stack([np.repeat(ends, 2), ends[nearest[:, 1:]].ravel()])
         else:
             edges = np.empty((0, 2), np.int64)
-    return View(np.asarray(points, np.float64), np.asarray(mass, np.float64), np.asarray(boundary, bool), edges)
+    return View(np.asarray(points, np.float64), np.asarray(mass, np.float64), np.asarray(boundary, bool), edges, faces)
 
 
 def view_of_part(part: Part) -> View:
@@ -287,13 +336,16 @@ def view_of_part(part: Part) -> View:
 def fused_spectrum(
     views: list[View], k: int, places: list[np.ndarray] | None = None, inside: InsideRule | None = None
 ) -> np.ndarray:
-    """The first ``k`` eigenvalues of the views' union (:func:`fused_cloud`), solved as an
-    uploaded point cloud is: Dirichlet on its boundary, or closed where none is left; with
-    ``places`` (each view's points' places on the template) and an ``inside`` rule, the boundary
-    points it finds inside the union freed first."""
+    """The first ``k`` eigenvalues of the views' union (:func:`fused_cloud`): on its glued
+    triangles where every view is a mesh, else as an uploaded point cloud is solved; Dirichlet on
+    its boundary, or closed where none is left. With ``places`` (each view's points' places on
+    the template) and an ``inside`` rule, the boundary points it finds inside the union are freed
+    first."""
     cloud = fused_cloud(views)
     if inside is not None and places is not None:
         cloud = cloud.freed(inside(views, places, cloud))
+    if cloud.faces is not None:
+        return glued_spectrum(cloud.points, cloud.faces, cloud.boundary, k)
     closed = not cloud.boundary.any()
     # Centred: robust-laplacian's point-cloud Laplacian drifts with the distance from the origin
     # (a unit sphere's λ₁ 5 % low 10 m out), and a session's frame is wherever its scanner put it.

@@ -50,6 +50,7 @@ def view_row(view: SessionView) -> tuple:
     """A view's columns, in :data:`VIEW_COLUMNS` order."""
     buffer = io.BytesIO()
     geometry = view.geometry
+    faces = {} if geometry.faces is None else {"faces": geometry.faces.astype(np.int32)}
     np.savez(
         buffer,
         points=geometry.points.astype(np.float32),
@@ -58,6 +59,7 @@ def view_row(view: SessionView) -> tuple:
         edges=geometry.edges.astype(np.int32),
         places=view.places.astype(np.float32),
         trusted=np.bool_(view.located.trusted),
+        **faces,
     )
     return (
         view.source,
@@ -79,6 +81,7 @@ def view_of_row(row: tuple, template_vertices: int) -> SessionView:
             arrays["mass"].astype(np.float64),
             arrays["boundary"].astype(bool),
             arrays["edges"].astype(np.int64),
+            arrays["faces"].astype(np.int64) if "faces" in arrays else None,  # a point cloud's view has none
         )
         places = arrays["places"].astype(np.float64)
         trusted = bool(arrays["trusted"]) if "trusted" in arrays else True

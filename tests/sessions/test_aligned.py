@@ -3,6 +3,8 @@ with no symmetry, views moved by random rigid motions come back where they were 
 motions themselves), their fused union is the registered views' union, and views of two poses,
 which no rigid motion joins, are left unaligned."""
 
+from dataclasses import replace
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -47,7 +49,7 @@ def three_views() -> tuple[list[View], list[np.ndarray]]:
 def moved(views: list[View], seed: int) -> tuple[list[View], list]:
     rng = np.random.default_rng(seed)
     motions = [(Rotation.random(random_state=rng).as_matrix(), rng.normal(size=3)) for _ in views]
-    out = [View(v.points @ r.T + t, v.mass, v.boundary, v.edges) for v, (r, t) in zip(views, motions, strict=True)]
+    out = [replace(v, points=v.points @ r.T + t) for v, (r, t) in zip(views, motions, strict=True)]
     return out, motions
 
 
@@ -97,7 +99,7 @@ def bent_third_view() -> tuple[list[View], list[np.ndarray]]:
     angle = 1.2 * np.clip(x - 0.3, 0, None)
     bent = np.column_stack([0.3 + (x - 0.3) * np.cos(angle) - z * np.sin(angle), right.points[:, 1], z])
     bent[:, 2] = (x - 0.3) * np.sin(angle) + z * np.cos(angle)
-    return [*views[:2], View(bent, right.mass, right.boundary, right.edges)], places
+    return [*views[:2], replace(right, points=bent)], places
 
 
 def test_the_views_that_come_together_are_fused_where_few_are_left_out():
@@ -117,6 +119,6 @@ def test_views_that_share_nothing_are_not_aligned():
     """Two views placed on one stretch of the template but far apart in shape (a place error the
     size of the overlap): the fit slides off, and nothing is answered rather than a NaN."""
     views, places = three_views()
-    far = View(views[2].points * 3.0, views[2].mass, views[2].boundary, views[2].edges)
+    far = replace(views[2], points=views[2].points * 3.0)
     sent, _ = moved([views[0], far], seed=6)
     assert aligned_views(sent, [places[0], places[0][: len(far.points)]]) is None

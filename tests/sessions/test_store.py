@@ -21,11 +21,12 @@ TEMPLATE_VERTICES = 100
 DAY = 24 * 3600.0
 
 
-def a_view(seed: int) -> SessionView:
+def a_view(seed: int, mesh: bool = True) -> SessionView:
     rng = np.random.default_rng(seed)
     points = rng.normal(size=(50, 3))
     boundary = rng.random(50) < 0.2
-    geometry = View(points, rng.random(50) * 1e-3, boundary, rng.integers(0, 50, size=(7, 2)))
+    faces = rng.integers(0, 50, size=(30, 3)) if mesh else None
+    geometry = View(points, rng.random(50) * 1e-3, boundary, rng.integers(0, 50, size=(7, 2)), faces)
     region = rng.random(TEMPLATE_VERTICES) < 0.3
     located = Located(Cover(region, region.astype(float)), float(rng.random()), float(rng.random()))
     values = np.sort(rng.random(20) * 100)
@@ -57,9 +58,18 @@ def test_a_view_comes_back_as_it_went_in(store_for):
     np.testing.assert_allclose(back.geometry.mass, sent.geometry.mass, rtol=1e-6)
     np.testing.assert_array_equal(back.geometry.boundary, sent.geometry.boundary)
     np.testing.assert_array_equal(back.geometry.edges, sent.geometry.edges)
+    np.testing.assert_array_equal(back.geometry.faces, sent.geometry.faces)
     np.testing.assert_allclose(back.places, sent.places, rtol=1e-6)
     np.testing.assert_array_equal(back.located.cover.region, sent.located.cover.region)
     assert back.located.confidence == sent.located.confidence and back.located.area == sent.located.area
+
+
+def test_a_point_cloud_view_comes_back_without_faces(store_for):
+    store = store_for()
+    meta = store.create(False, "m", None)
+    store.add_view(meta.id, a_view(2, mesh=False), 32)
+    _, (back,) = store.views(meta.id, TEMPLATE_VERTICES)
+    assert back.geometry.faces is None
 
 
 def test_views_added_at_once_all_land_in_one_order(store_for):

@@ -8,7 +8,7 @@ chain and the elementwise minimum read the views' spectra. Shared by the calibra
 (:mod:`training.sessions.calibrate`) and the card's evaluation.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -61,9 +61,7 @@ def moved(views: list[SessionView], rng: np.random.Generator) -> list[View]:
     for view in views:
         w, x, y, z = rng.normal(size=4)  # a uniform random rotation: a normal quaternion, normalized
         rotation = Rotation.from_quat([x, y, z, w]).as_matrix()
-        geometry = view.geometry
-        points = geometry.points @ rotation.T + rng.normal(size=3)
-        out.append(View(points, geometry.mass, geometry.boundary, geometry.edges))
+        out.append(replace(view.geometry, points=view.geometry.points @ rotation.T + rng.normal(size=3)))
     return out
 
 
