@@ -131,15 +131,16 @@ def fused_cloud(views: list[View]) -> FusedCloud:
     pair of views."""
     trees = [cKDTree(view.points) for view in views]
     reaches = [_reach(tree) for tree in trees]
-    gone = set(covered_views(views, trees, reaches))
-    order = [i for i in canonical_order(views) if i not in gone]
-    views, trees, reaches = [views[i] for i in order], [trees[i] for i in order], [reaches[i] for i in order]
-    pairs = {
+    every = {
         (i, j): _Pair.of(view, reaches[i], trees[j], reaches[j])
         for i, view in enumerate(views)
         for j in range(len(views))
         if i != j
     }
+    gone = covered_views(views, every)
+    order = [i for i in canonical_order(views) if i not in gone]
+    pairs = {(a, b): every[order[a], order[b]] for a in range(len(order)) for b in range(len(order)) if a != b}
+    views, trees = [views[i] for i in order], [trees[i] for i in order]
     kept = [np.ones(len(view.points), bool) for view in views]
     under = [np.zeros(len(view.points), bool) for view in views]  # on an earlier view's inside
     loose = [view.boundary.copy() for view in views]  # boundary points no other view's inside covers
@@ -152,39 +153,47 @@ def fused_cloud(views: list[View]) -> FusedCloud:
     seamed = _bridge(views, trees, pairs, loose)
     pinholes, loops = _pinholes(views, pairs, loose, kept)
     centres = np.array([loop.mean(axis=0) for loop in loops], dtype=np.float64).reshape(-1, 3)
-    points, boundary, labels = [], [], []
-    for index, (view, keep, edge, hole) in enumerate(zip(views, kept, loose, pinholes, strict=True)):
+    points, boundary = [], []
+    for view, keep, edge, hole in zip(views, kept, loose, pinholes, strict=True):
         points.append(view.points[keep])
         boundary.append((edge & ~hole)[keep])
-        labels.append(np.full(int(keep.sum()), index))
     cloud, flags = np.concatenate(points + [centres]), np.concatenate(boundary + [np.zeros(len(centres), bool)])
     flags |= _edges_of_dropped(views, kept, loose, pinholes, cloud)
     faces = None
     if all(view.faces is not None for view in views):
         seams = [Seams(v.faces, k, u, ~k | s) for v, k, u, s in zip(views, kept, under, seamed, strict=True)]
-        labels = np.concatenate(labels + [np.full(len(centres), -1)])
-        glued = welded_faces([view.points for view in views], seams, cloud, labels)
-        rings = [cKDTree(cloud).query(loop)[1] for loop in loops]
-        faces = np.concatenate([glued, cap_fans(cloud, rings, centres, len(cloud) - len(centres))])
+        faces = _glued(views, seams, cloud, loops)
     return FusedCloud(cloud, _without_fragments(cloud, flags), len(centres), faces)
 
 
-def covered_views(views: list[View], trees: list[cKDTree], reaches: list[np.ndarray]) -> list[int]:
-    """The views another view holds whole (all but COVERED_SHARE of their area on its inside, or
-    on its boundary points themselves), which add nothing to the union. Of views that hold each other (a part
-    and its re-meshed copy) the one with more points stays: the finer mesh is the truer."""
-    gone: list[int] = []
+def covered_views(views: list[View], pairs: dict[tuple[int, int], _Pair]) -> set[int]:
+    """The views another view holds whole (all but COVERED_SHARE of their area on its inside or
+    on its boundary points themselves), which add nothing to the union. Of views that hold each
+    other (a part and its re-meshed copy) the one with more points stays: the finer mesh."""
+    gone: set[int] = set()
     for i in sorted(range(len(views)), key=lambda i: (len(views[i].points), float(views[i].mass.sum()))):
-        view = views[i]
         for j in range(len(views)):
             if j == i or j in gone:
                 continue
-            pair = _Pair.of(view, reaches[i], trees[j], reaches[j])
-            off = ~(pair.near() & ~views[j].boundary[pair.nearest]) & ~pair.near(DUPLICATE, nearer=True)
-            if float(view.mass[off].sum()) <= COVERED_SHARE * float(view.mass.sum()):
-                gone.append(i)
+            pair = pairs[i, j]
+            on = (pair.near() & ~views[j].boundary[pair.nearest]) | pair.near(DUPLICATE, nearer=True)
+            if float(views[i].mass[~on].sum()) <= COVERED_SHARE * float(views[i].mass.sum()):
+                gone.add(i)
                 break
     return gone
+
+
+def _glued(views: list[View], seams: list[Seams], cloud: np.ndarray, loops: list[np.ndarray]) -> np.ndarray:
+    """The views' own triangles over the cloud's points, welded at the seams, and a fan capping
+    each pin-hole (its points ``loops[h]``, its centre the cloud's ``h``-th of the last
+    ``len(loops)`` points)."""
+    owner = np.concatenate([np.full(int(seam.kept.sum()), index) for index, seam in enumerate(seams)])
+    owner = np.concatenate([owner, np.full(len(loops), -1)])
+    glued = welded_faces([view.points for view in views], seams, cloud, owner)
+    tree = cKDTree(cloud)
+    rings = [tree.query(loop)[1] for loop in loops]
+    first = len(cloud) - len(loops)
+    return np.concatenate([glued, cap_fans(cloud, rings, cloud[first:], first)])
 
 
 def _without_fragments(points: np.ndarray, flags: np.ndarray) -> np.ndarray:

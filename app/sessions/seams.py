@@ -40,9 +40,9 @@ class Seams:
     welded: np.ndarray
 
 
-def welded_faces(points: list[np.ndarray], seams: list[Seams], cloud: np.ndarray, labels: np.ndarray) -> np.ndarray:
+def welded_faces(points: list[np.ndarray], seams: list[Seams], cloud: np.ndarray, owner: np.ndarray) -> np.ndarray:
     """(m, 3) the views' triangles over the cloud's points, each once. ``points``: each view's
-    points; ``labels``: (len(cloud),) the view each cloud point comes from (−1 for none)."""
+    points; ``owner``: (len(cloud),) the view each cloud point comes from (−1 for none)."""
     tree = cKDTree(cloud)
     offset, out = 0, []
     for index, (own, seam) in enumerate(zip(points, seams, strict=True)):
@@ -51,7 +51,7 @@ def welded_faces(points: list[np.ndarray], seams: list[Seams], cloud: np.ndarray
         offset += int(seam.kept.sum())
         moved = np.flatnonzero(seam.welded)
         if len(moved):
-            into[moved] = _nearest_of_another(tree, labels, own[moved], index)
+            into[moved] = _nearest_of_another(tree, owner, own[moved], index)
         out.append(into[seam.faces[~seam.under[seam.faces].all(axis=1)]])
     triangles = np.concatenate(out)
     a, b, c = triangles.T
@@ -60,12 +60,12 @@ def welded_faces(points: list[np.ndarray], seams: list[Seams], cloud: np.ndarray
     return triangles[np.sort(first)]
 
 
-def _nearest_of_another(tree: cKDTree, labels: np.ndarray, points: np.ndarray, view: int) -> np.ndarray:
+def _nearest_of_another(tree: cKDTree, owner: np.ndarray, points: np.ndarray, view: int) -> np.ndarray:
     """For each of a view's ``points``, the nearest cloud point another view put there (the
     nearest cloud point where none is among the WELD_CANDIDATES nearest)."""
     _, nearest = tree.query(points, k=min(WELD_CANDIDATES, tree.n))
     nearest = nearest.reshape(len(points), -1)
-    other = labels[nearest] != view
+    other = owner[nearest] != view
     pick = np.where(other.any(axis=1), other.argmax(axis=1), 0)
     return nearest[np.arange(len(points)), pick]
 
