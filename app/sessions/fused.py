@@ -71,13 +71,15 @@ class View:
 @dataclass(frozen=True)
 class FusedCloud:
     """The union as one point cloud: ``points`` (n, 3), ``boundary`` (n,) held at zero, how
-    many pin-holes between views were capped, and where every view is a mesh the views' triangles
-    glued over the points (:mod:`app.sessions.seams`; None otherwise)."""
+    many pin-holes between views were capped, where every view is a mesh the views' triangles
+    glued over the points (:mod:`app.sessions.seams`; None otherwise), and how many views it was
+    made of (those another view held whole left out)."""
 
     points: np.ndarray
     boundary: np.ndarray
     capped: int
     faces: np.ndarray | None = None
+    views: int = 1
 
     def freed(self, inside: np.ndarray) -> "FusedCloud":
         """The cloud with the boundary points ``inside`` (n,) freed, and the fragments that
@@ -163,7 +165,7 @@ def fused_cloud(views: list[View]) -> FusedCloud:
     if all(view.faces is not None for view in views):
         seams = [Seams(v.faces, k, u, ~k | s) for v, k, u, s in zip(views, kept, under, seamed, strict=True)]
         faces = _glued(views, seams, cloud, loops)
-    return FusedCloud(cloud, _without_fragments(cloud, flags), len(centres), faces)
+    return FusedCloud(cloud, _without_fragments(cloud, flags), len(centres), faces, len(views))
 
 
 def covered_views(views: list[View], pairs: dict[tuple[int, int], _Pair]) -> set[int]:
@@ -349,9 +351,9 @@ def fused_spectrum(
     triangles where every view is a mesh, else as an uploaded point cloud is solved; Dirichlet on
     its boundary, or closed where none is left. With ``places`` (each view's points' places on
     the template) and an ``inside`` rule, the boundary points it finds inside the union are freed
-    first."""
+    first, where it is made of more than one view: one view's boundary is what was seen, U(A) = A."""
     cloud = fused_cloud(views)
-    if inside is not None and places is not None:
+    if inside is not None and places is not None and cloud.views > 1:
         cloud = cloud.freed(inside(views, places, cloud))
     if cloud.faces is not None:
         return glued_spectrum(cloud.points, cloud.faces, cloud.boundary, k)

@@ -108,6 +108,19 @@ def test_a_view_with_its_coarser_copy_is_the_view():
         np.testing.assert_allclose(fused_spectrum(views, K), own_spectrum(fine), rtol=1e-9)
 
 
+def test_one_view_is_its_own_union_whatever_another_reading_says():
+    """U(A) = A: the boundary of one view is what was seen. An ``inside`` rule that would free
+    every boundary point is not asked, for the view alone or with a patch it holds whole."""
+    whole, patch = view(0.0, 2.0, 0.04), view(0.5, 1.1, 0.02, y1=0.6, shift=0.2)
+
+    def everything_inside(views, places, cloud):
+        return np.ones(len(cloud.points), bool)
+
+    for views in ([whole], [whole, patch]):
+        places = [one.points for one in views]
+        np.testing.assert_allclose(fused_spectrum(views, K, places, everything_inside), own_spectrum(whole), rtol=1e-9)
+
+
 def test_views_cut_from_one_mesh_glue_back_into_it():
     """Left and right of one meshed rectangle, overlapping in the middle and sharing its
     vertices there: glued, they are the whole mesh again, and so is its spectrum."""
