@@ -351,9 +351,10 @@ def fused_spectrum(
     triangles where every view is a mesh, else as an uploaded point cloud is solved; Dirichlet on
     its boundary, or closed where none is left. With ``places`` (each view's points' places on
     the template) and an ``inside`` rule, the boundary points it finds inside the union are freed
-    first, where it is made of more than one view: one view's boundary is what was seen, U(A) = A."""
+    first, where it is made of more than one view (one view's boundary is what was seen: U(A) = A)
+    and has a boundary to free (the rule's body fit is the costliest step)."""
     cloud = fused_cloud(views)
-    if inside is not None and places is not None and cloud.views > 1:
+    if inside is not None and places is not None and cloud.views > 1 and cloud.boundary.any():
         cloud = cloud.freed(inside(views, places, cloud))
     if cloud.faces is not None:
         return glued_spectrum(cloud.points, cloud.faces, cloud.boundary, k)
