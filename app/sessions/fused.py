@@ -141,6 +141,9 @@ def fused_cloud(views: list[View]) -> FusedCloud:
     }
     gone = covered_views(views, every)
     order = [i for i in canonical_order(views) if i not in gone]
+    if len(order) == 1:  # one view is its own union: its points, boundary and triangles as solved
+        (alone,) = (views[i] for i in order)
+        return FusedCloud(alone.points, alone.boundary.copy(), 0, alone.faces)
     pairs = {(a, b): every[order[a], order[b]] for a in range(len(order)) for b in range(len(order)) if a != b}
     views, trees = [views[i] for i in order], [trees[i] for i in order]
     kept = [np.ones(len(view.points), bool) for view in views]
