@@ -19,8 +19,8 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
+import qdldl
 import scipy.sparse as sp
-from scipy.sparse.linalg import splu
 from scipy.spatial import cKDTree
 
 from app.contract import BODY_FILE
@@ -90,16 +90,22 @@ def _drawn_onto(seen: SeenTemplate, body: np.ndarray, points: np.ndarray) -> np.
     """(V, 3) the fitted ``body`` drawn onto ``points``: each round, every vertex some point is
     nearest to is pulled toward those points' mean, the pull spread over the template by a
     membrane of the round's stiffness (stiff first, so the whole body slides before any vertex
-    bends)."""
+    bends). Every round's system has the same sparsity: one LDLᵀ analysis, refactored numerically
+    each round."""
     laplacian = sp.diags(seen.degree) - seen.graph
+    solver = None
     for stiffness in STIFFNESS:
         distance, vertex = cKDTree(body).query(points)
         near = distance < DRAW_REACH * _edge_length(seen, body)[vertex]
         vertex, gap = vertex[near], points[near] - body[vertex[near]]
         count = np.bincount(vertex, minlength=len(body)).astype(np.float64)
         pull = np.stack([np.bincount(vertex, weights=gap[:, c], minlength=len(body)) for c in range(3)], axis=1)
-        system = (sp.diags(count + 1e-6) + stiffness * laplacian).tocsc()
-        body = body + splu(system).solve(pull)
+        upper = sp.triu(sp.diags(count + 1e-6) + stiffness * laplacian, format="csc")
+        if solver is None:
+            solver = qdldl.Solver(upper, upper=True)
+        else:
+            solver.update(upper, upper=True)
+        body = body + np.column_stack([solver.solve(pull[:, c]) for c in range(3)])
     return body
 
 
