@@ -176,7 +176,8 @@ def covered_views(views: list[View], pairs: dict[tuple[int, int], _Pair]) -> set
     on its boundary points themselves), which add nothing to the union. Of views that hold each
     other (a part and its re-meshed copy) the one with more points stays: the finer mesh."""
     gone: set[int] = set()
-    for i in sorted(range(len(views)), key=lambda i: (len(views[i].points), float(views[i].mass.sum()))):
+    keys = [(len(view.points), float(view.mass.sum()), float(view.points.sum())) for view in views]
+    for i in sorted(range(len(views)), key=keys.__getitem__):  # the coarser first: whatever order they came in
         for j in range(len(views)):
             if j == i or j in gone:
                 continue
