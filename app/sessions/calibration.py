@@ -1,7 +1,7 @@
 """σ of a session's union solved on its views, and which way an unregistered session is read.
 
 A union solved on the views (fused: registered views; aligned: views brought into one frame
-through their places) is a point cloud's spectrum, not a prediction, but its boundary is inferred
+through their places) is a spectrum solved on the views, not a prediction, but its boundary is inferred
 (where views stop and no other goes on), an aligned one's frames too, and its error grows with
 the views' count as a session closes around the body. ``spectral-unions-train
 calibrate-sessions`` measures both on anny sessions with exact truth and writes

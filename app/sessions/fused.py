@@ -6,7 +6,8 @@ anny sessions of 12 and 24 views it is tens of per cent off where the views fuse
 at hand in one frame (a tracked scanner's), nothing needs predicting: the union is the views'
 points, each surface point counted once (the largest view's where views overlap, so any order or
 grouping of the views gives one union), with the Dirichlet boundary where a view stops and no
-other view goes on, and its spectrum is solved once, as an uploaded point cloud is.
+other view goes on, and its spectrum is solved once: on the views' own triangles glued together
+where every view is a mesh, else as an uploaded point cloud is.
 
 What decides the answer is the union's boundary. A view's boundary point is inside the union
 where another view's inside is within reach (the local spacing of either view, at least
@@ -70,9 +71,9 @@ class View:
 
 @dataclass(frozen=True)
 class FusedCloud:
-    """The union as one point cloud: ``points`` (n, 3), ``boundary`` (n,) held at zero, how
-    many pin-holes between views were capped, where every view is a mesh the views' triangles
-    glued over the points (:mod:`app.sessions.seams`; None otherwise), and how many views it was
+    """The union's points, each surface point once: ``points`` (n, 3), ``boundary`` (n,) held at
+    zero, how many pin-holes between views were capped, where every view is a mesh the views'
+    triangles glued over the points (:mod:`app.sessions.seams`; None otherwise), and how many views it was
     made of (those another view held whole left out)."""
 
     points: np.ndarray
