@@ -99,9 +99,7 @@ def prepare_mesh(mesh: Mesh, *, k: int, max_hole_edges: int, cap_holes: bool = F
     _require_valid_faces(faces, len(vertices))
     vertices, faces, sources = _merge_duplicate_vertices(vertices, faces)
     given = len(faces)
-    faces = _distinct_faces(
-        faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])]
-    )
+    faces = surface_faces(faces)
     if len(faces) == 0:
         raise InvalidGeometry("every face repeats a vertex: there is no surface")
     if face_areas(vertices, faces).sum() <= 1e-12 * _extent(vertices) ** 2:
@@ -221,7 +219,14 @@ def _require_surface_edges(counts: np.ndarray) -> None:
         )
 
 
-def _distinct_faces(faces: np.ndarray) -> np.ndarray:
+def surface_faces(faces: np.ndarray) -> np.ndarray:
+    """The faces that are surface: each triangle once (:func:`distinct_faces`), none that
+    repeats a vertex (no area, and a zero row the Laplacian cannot take)."""
+    a, b, c = faces.T
+    return distinct_faces(faces[(a != b) & (b != c) & (c != a)])
+
+
+def distinct_faces(faces: np.ndarray) -> np.ndarray:
     """Each triangle once, in the order first given, whatever its orientation or vertex order.
 
     A repeated face is not more surface: it doubles its area in the mass matrix (λ₁ of a disk

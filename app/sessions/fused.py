@@ -196,8 +196,8 @@ def _glued(views: list[View], seams: list[Seams], cloud: np.ndarray, loops: list
     ``len(loops)`` points)."""
     owner = np.concatenate([np.full(int(seam.kept.sum()), index) for index, seam in enumerate(seams)])
     owner = np.concatenate([owner, np.full(len(loops), -1)])
-    glued = welded_faces([view.points for view in views], seams, cloud, owner)
     tree = cKDTree(cloud)
+    glued = welded_faces([view.points for view in views], seams, tree, owner)
     rings = [tree.query(loop)[1] for loop in loops]
     first = len(cloud) - len(loops)
     return np.concatenate([glued, cap_fans(cloud, rings, cloud[first:], first)])

@@ -21,7 +21,8 @@ from scipy.spatial import cKDTree
 
 from app.geometry.laplacian import mesh_operators
 from app.geometry.spectrum import eigenpairs
-from app.geometry.topology import face_areas
+from app.geometry.topology import drop_unreferenced, face_areas, referenced
+from app.geometry.validate import surface_faces
 
 WELD_CANDIDATES = 8  # nearest cloud points searched for one of another view to weld onto
 MIN_COMPONENT_SHARE = 0.01  # of the glued area: a piece smaller than this, left by the seams, is no surface
@@ -40,10 +41,10 @@ class Seams:
     welded: np.ndarray
 
 
-def welded_faces(points: list[np.ndarray], seams: list[Seams], cloud: np.ndarray, owner: np.ndarray) -> np.ndarray:
-    """(m, 3) the views' triangles over the cloud's points, each once. ``points``: each view's
-    points; ``owner``: (len(cloud),) the view each cloud point comes from (−1 for none)."""
-    tree = cKDTree(cloud)
+def welded_faces(points: list[np.ndarray], seams: list[Seams], cloud: cKDTree, owner: np.ndarray) -> np.ndarray:
+    """(m, 3) the views' triangles over the cloud's points (its k-d tree ``cloud``), each once.
+    ``points``: each view's points; ``owner``: the view each cloud point comes from (−1 for
+    none)."""
     offset, out = 0, []
     for index, (own, seam) in enumerate(zip(points, seams, strict=True)):
         into = np.full(len(own), -1)
@@ -51,13 +52,9 @@ def welded_faces(points: list[np.ndarray], seams: list[Seams], cloud: np.ndarray
         offset += int(seam.kept.sum())
         moved = np.flatnonzero(seam.welded)
         if len(moved):
-            into[moved] = _nearest_of_another(tree, owner, own[moved], index)
+            into[moved] = _nearest_of_another(cloud, owner, own[moved], index)
         out.append(into[seam.faces[~seam.under[seam.faces].all(axis=1)]])
-    triangles = np.concatenate(out)
-    a, b, c = triangles.T
-    triangles = triangles[(a != b) & (b != c) & (c != a)]
-    _, first = np.unique(np.sort(triangles, axis=1), axis=0, return_index=True)
-    return triangles[np.sort(first)]
+    return surface_faces(np.concatenate(out))  # welding collapses some, and gives others twice
 
 
 def _nearest_of_another(tree: cKDTree, owner: np.ndarray, points: np.ndarray, view: int) -> np.ndarray:
@@ -90,9 +87,8 @@ def glued_spectrum(cloud: np.ndarray, faces: np.ndarray, boundary: np.ndarray, k
     less the specks the seams leave (pieces under MIN_COMPONENT_SHARE of the area); Dirichlet on
     ``boundary``, or closed where none is left."""
     faces = _without_specks(cloud, faces)
-    used = np.zeros(len(cloud), bool)
-    used[faces.ravel()] = True
-    operators = mesh_operators(cloud[used], (np.cumsum(used) - 1)[faces])
+    used = referenced(faces, len(cloud))
+    operators = mesh_operators(*drop_unreferenced(cloud, faces))
     fixed = boundary[used]
     values, _ = eigenpairs(operators, k, fixed if fixed.any() else None, vectors=False)
     return np.asarray(values)

@@ -15,7 +15,7 @@ from app.geometry.topology import (
     largest_component,
     row_sums,
 )
-from app.geometry.validate import _GENERIC, _distinct_faces, _merge_duplicate_vertices
+from app.geometry.validate import _GENERIC, _merge_duplicate_vertices, distinct_faces
 
 
 def _random_faces(rng: np.random.Generator, vertices: int, faces: int) -> np.ndarray:
@@ -109,10 +109,10 @@ def test_distinct_vertices_sharing_a_weighted_sum_are_not_merged():
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_distinct_faces_keep_the_first_of_each_triangle_in_any_vertex_order(seed):
+def testdistinct_faces_keep_the_first_of_each_triangle_in_any_vertex_order(seed):
     rng = np.random.default_rng(seed)
     faces = _random_faces(rng, 8, 60)  # few vertices: many repeats, in every rotation and orientation
-    kept = _distinct_faces(faces)
+    kept = distinct_faces(faces)
     first = {}
     for face in faces.tolist():
         first.setdefault(frozenset(face), face)
