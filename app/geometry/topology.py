@@ -61,24 +61,28 @@ def vertices_of(edges: np.ndarray, n_vertices: int) -> np.ndarray:
     return mask
 
 
+def component_areas(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(m,) the connected piece each face belongs to (pieces joined through shared vertices,
+    numbered from 0) and (pieces,) each piece's area."""
+    n = len(vertices)
+    rows = np.repeat(faces[:, 0], 2)
+    cols = faces[:, 1:].reshape(-1)
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    face_labels = np.unique(labels[faces[:, 0]], return_inverse=True)[1]
+    return face_labels, np.bincount(face_labels, weights=face_areas(vertices, faces))
+
+
 def largest_component(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, int]:
     """Faces of the largest connected component by area, and how many others were dropped.
 
     Components are joined through shared vertices; area, not vertex count, decides, because a
     scan's dense fragment can out-count a coarser main surface.
     """
-    n = len(vertices)
-    rows = np.repeat(faces[:, 0], 2)
-    cols = faces[:, 1:].reshape(-1)
-    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    count, labels = connected_components(graph, directed=False)
-    if count == 1:
+    face_labels, area = component_areas(vertices, faces)
+    if len(area) == 1:
         return faces, 0
-    face_labels = labels[faces[:, 0]]
-    present, face_labels = np.unique(face_labels, return_inverse=True)
-    area = np.bincount(face_labels, weights=face_areas(vertices, faces))
-    keep = int(np.argmax(area))
-    return faces[face_labels == keep], len(present) - 1
+    return faces[face_labels == int(np.argmax(area))], len(area) - 1
 
 
 def referenced(faces: np.ndarray, n_vertices: int) -> np.ndarray:

@@ -15,13 +15,11 @@ centre. Measured against the exact union on anny sessions:
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from app.geometry.laplacian import mesh_operators
 from app.geometry.spectrum import eigenpairs
-from app.geometry.topology import drop_unreferenced, face_areas, referenced
+from app.geometry.topology import component_areas, drop_unreferenced, referenced
 from app.geometry.validate import surface_faces
 
 WELD_CANDIDATES = 8  # nearest cloud points searched for one of another view to weld onto
@@ -98,9 +96,5 @@ def _without_specks(cloud: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """``faces`` less the connected pieces holding under MIN_COMPONENT_SHARE of their area: a
     piece that small is what a seam leaves, and one with no boundary would add a zero
     eigenvalue; the union's real pieces (views that do not touch) stay."""
-    n = len(cloud)
-    graph = sp.coo_matrix((np.ones(2 * len(faces)), (np.repeat(faces[:, 0], 2), faces[:, 1:].ravel())), (n, n))
-    _, label = connected_components(graph, directed=False)
-    piece = label[faces[:, 0]]
-    area = np.bincount(piece, weights=face_areas(cloud, faces))
+    piece, area = component_areas(cloud, faces)
     return faces[area[piece] >= MIN_COMPONENT_SHARE * area.sum()]
