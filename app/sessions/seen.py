@@ -24,9 +24,8 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from app.contract import BODY_FILE
-from app.geometry.topology import half_edges
 from app.inference.bodyfit import BodyBasis, NotEnoughSeen
-from app.inference.template import Template
+from app.inference.template import Template, edge_graph
 from app.sessions.body import NoBodyFits, fitted_views
 from app.sessions.fused import FusedCloud, View, canonical_order
 
@@ -48,7 +47,8 @@ class SeenTemplate:
 
     @classmethod
     def of(cls, basis: BodyBasis, template: Template) -> "SeenTemplate":
-        return cls(basis, template.vertices, _vertex_graph(template.faces))
+        edges = edge_graph(template.vertices, template.faces)
+        return cls(basis, template.vertices, (edges > 0).astype(np.float64).tocsr())
 
     @cached_property
     def degree(self) -> np.ndarray:
@@ -129,12 +129,3 @@ def _eroded(seen: SeenTemplate, region: np.ndarray, rings: int) -> np.ndarray:
     for _ in range(rings):
         region = region & (seen.graph @ region.astype(np.float64) >= seen.degree)
     return region
-
-
-def _vertex_graph(faces: np.ndarray) -> sp.csr_matrix:
-    """(V, V) the template's edges, both ways, ones."""
-    count = int(faces.max()) + 1
-    pairs = half_edges(faces)
-    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count)).tocsr()
-    graph = ((graph + graph.T) > 0).astype(np.float64)
-    return graph.tocsr()
