@@ -15,8 +15,9 @@ the spectrum of the union of the views' template masks, solved by the service's 
   places on the template (what ``/v1/union`` answers for spectra sent with their region tokens);
 - ``chain told``: the same, told each step's overlap measured from the registered views'
   footprints (``measure_overlap=true``);
-- ``fused``: the registered views fused into one cloud and solved once, its boundary checked
-  against the body fitted to them, as a solver worker solves it (:mod:`app.sessions.solved`).
+- ``fused``: the registered views fused and solved once (glued through their own triangles),
+  its boundary checked against the body fitted to them, as a solver worker solves it
+  (:mod:`app.sessions.solved`).
 
 Needs the ``train`` extra (anny) and the served models in ``models/``.
 """
