@@ -105,43 +105,30 @@ async def union_of_operands(
     ``cap_holes``: one uploaded whole-body scan, its holes capped
     (:func:`app.api.operands.resolve_operands`); ``locate``: the route answers the operands'
     region, so even one upload is placed (others place uploads only to measure a step)."""
-    files, spectra = sent.files, sent.spectra
     overlaps, boundaries = parse_shares(told.overlap), parse_shares(told.boundary, "boundary")
     if told.measure:
-        _check_measurable(overlaps, boundaries, spectra, models)
-
-    tokens = await region_tokens(request) if told.regions is not None else None
-    carried = _carried_regions(told.regions, spectra, models, tokens)
-    if carried is not None and files and models.correspondence is None:
-        raise InvalidRegion("these models cannot place uploaded files: send regions with spectra operands only")
-    steps = bool(files) and len(files) + (len(carried) if carried else 0) > 1
-    only_placeable = not (spectra and spectra.strip()) or carried is not None
-    places = models.correspondence is not None and bool(files) and only_placeable and (locate or steps)
-    place_with = models.correspondence.path if places else None
+        _check_measurable(overlaps, boundaries, sent.spectra, models)
+    carried = await _carried(request, told, sent, models)
+    place_with = _placing_with(models, sent, carried, locate)
     wanted = Wanted(footprints=told.measure, cap_holes=cap_holes, place_with=place_with)
     counted = await counted_operands(request, sent, models.k, cap_holes)
     checked_overlaps(overlaps, counted.count, models.reads_overlap)
     checked_boundaries(boundaries, overlaps, counted.count, models.reads_boundary)
     operands, solve_ms = await resolve_operands(request, settings, counted, models.k, wanted)
-    placed = await anyio.to_thread.run_sync(_placed, models, operands) if places else []
+    placed = await anyio.to_thread.run_sync(_placed, models, operands) if place_with else []
     covers = [part.counted for part in placed] + (carried or [])
     if len(covers) != len(operands):
         covers = None  # some operand's place is unknown: the spectral localizer and no measured overlap
     values = [np.asarray(o.eigenvalues, dtype=np.float64) for o in operands]
-    warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]
-    warnings += _doubts(operands, placed)
-    warnings += size_warnings(values, [o.source for o in operands])
     started = time.perf_counter()
-    union, by = None, "operand" if len(operands) == 1 else "learned-chain"
+    read = None
     if overlaps is None and boundaries is None and len(placed) == len(operands) > 1:  # every operand an upload
-        views = [placed_view(o.source, o.eigenvalues, o.part, part) for o, part in zip(operands, placed, strict=True)]
-        union = await views_union(models, views, told.measure, request.app.state.solver.session_union)
-    if union is not None:
-        measured = await _measured(operands) if told.measure else None
-        fold, by = _as_folded(union, measured), union.union_by
-    else:
+        read = await _from_geometry(request, models, operands, placed, told.measure)
+    if read is None:
         located = None if covers is None else _located(models, placed, carried or [])
         fold = await _folded(models, operands, values, located, overlaps, boundaries, told.measure)
+        read = fold, "operand" if len(operands) == 1 else "learned-chain"
+    fold, by = read
     seconds = time.perf_counter() - started
     INFERENCE.labels("union").observe(seconds)
     return UnionOutcome(
@@ -149,7 +136,7 @@ async def union_of_operands(
         fold.result,
         solve_ms,
         seconds * 1e3,
-        warnings,
+        _warnings(operands, placed, values),
         fold.overlaps,
         fold.boundaries,
         fold.source,
@@ -159,6 +146,47 @@ async def union_of_operands(
         covers,
         by,
     )
+
+
+async def _carried(request: Request, told: Told, sent: SentOperands, models: SpectralModels) -> list[Cover] | None:
+    """The regions carried by the spectra operands' tokens (None when none were sent), checked
+    against their spectra before anything is solved."""
+    tokens = await region_tokens(request) if told.regions is not None else None
+    carried = _carried_regions(told.regions, sent.spectra, models, tokens)
+    if carried is not None and sent.files and models.correspondence is None:
+        raise InvalidRegion("these models cannot place uploaded files: send regions with spectra operands only")
+    return carried
+
+
+def _placing_with(models: SpectralModels, sent: SentOperands, carried: list[Cover] | None, locate: bool) -> str | None:
+    """The correspondence graph the uploads are placed with, or None: placed where the route
+    answers their region (``locate``) or where there is a union step to measure, and every
+    operand can be placed (an upload, or a spectrum whose region was carried)."""
+    if models.correspondence is None or not sent.files:
+        return None
+    steps = len(sent.files) + (len(carried) if carried else 0) > 1
+    only_placeable = not (sent.spectra and sent.spectra.strip()) or carried is not None
+    return models.correspondence.path if only_placeable and (locate or steps) else None
+
+
+async def _from_geometry(
+    request: Request, models: SpectralModels, operands: list[Operand], placed: list[PlacedPart], measure: bool
+) -> tuple[FoldedUnion, str] | None:
+    """The uploads' union read from their geometry as a session reads its views (fused where
+    ``measure`` declares them in one frame and pose, else aligned through their places), and
+    what made it; None where the learned chain reads it (:func:`app.sessions.reading.views_union`)."""
+    views = [placed_view(o.source, o.eigenvalues, o.part, part) for o, part in zip(operands, placed, strict=True)]
+    union = await views_union(models, views, measure, request.app.state.solver.session_union)
+    if union is None:
+        return None
+    measured = await _measured(operands) if measure else None
+    return _as_folded(union, measured), union.union_by
+
+
+def _warnings(operands: list[Operand], placed: list[PlacedPart], values: list[np.ndarray]) -> list[str]:
+    """Every operand's own warnings, each placed upload's doubts, and the sizes that do not fit one body."""
+    warnings = [f"{o.source}: {w}" for o in operands if o.report for w in o.report.warnings]
+    return warnings + _doubts(operands, placed) + size_warnings(values, [o.source for o in operands])
 
 
 async def _folded(
