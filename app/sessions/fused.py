@@ -135,36 +135,20 @@ def fused_cloud(views: list[View]) -> FusedCloud:
     between views capped; a view another holds whole left out first. Costs a k-d tree query per
     pair of views."""
     trees = [cKDTree(view.points) for view in views]
-    reaches = [_reach(tree) for tree in trees]
-    every = {
-        (i, j): _Pair.of(view, reaches[i], trees[j], reaches[j])
-        for i, view in enumerate(views)
-        for j in range(len(views))
-        if i != j
-    }
+    every = _every_pair(views, trees)
     gone = covered_views(views, every)
     order = [i for i in canonical_order(views) if i not in gone]
     if len(order) == 1:  # one view is its own union: its points, boundary and triangles as solved
         (alone,) = (views[i] for i in order)
         return FusedCloud(alone.points, alone.boundary.copy(), 0, alone.faces)
-    pairs = {(a, b): every[order[a], order[b]] for a in range(len(order)) for b in range(len(order)) if a != b}
+    pairs = {(a, b): every[order[a], order[b]] for a, b in _ordered_pairs(len(order))}
     views, trees = [views[i] for i in order], [trees[i] for i in order]
-    kept = [np.ones(len(view.points), bool) for view in views]
-    under = [np.zeros(len(view.points), bool) for view in views]  # on an earlier view's inside
-    loose = [view.boundary.copy() for view in views]  # boundary points no other view's inside covers
-    for (i, j), pair in pairs.items():
-        inside = pair.near() & ~views[j].boundary[pair.nearest]
-        if j < i:  # a larger view's inside, or one of its points, is already there
-            kept[i] &= ~(inside | pair.near(DUPLICATE, nearer=True))
-            under[i] |= inside
-        loose[i] &= ~inside
+    kept, under, loose = _overlapped(views, pairs)
     seamed = _bridge(views, trees, pairs, loose)
     pinholes, loops = _pinholes(views, pairs, loose, kept)
     centres = np.array([loop.mean(axis=0) for loop in loops], dtype=np.float64).reshape(-1, 3)
-    points, boundary = [], []
-    for view, keep, edge, hole in zip(views, kept, loose, pinholes, strict=True):
-        points.append(view.points[keep])
-        boundary.append((edge & ~hole)[keep])
+    points = [view.points[keep] for view, keep in zip(views, kept, strict=True)]
+    boundary = [(edge & ~hole)[keep] for keep, edge, hole in zip(kept, loose, pinholes, strict=True)]
     cloud, flags = np.concatenate(points + [centres]), np.concatenate(boundary + [np.zeros(len(centres), bool)])
     flags |= _edges_of_dropped(views, kept, loose, pinholes, cloud)
     faces = None
@@ -172,6 +156,35 @@ def fused_cloud(views: list[View]) -> FusedCloud:
         seams = [Seams(v.faces, k, u, ~k | s) for v, k, u, s in zip(views, kept, under, seamed, strict=True)]
         faces = _glued(views, seams, cloud, loops)
     return FusedCloud(cloud, _without_fragments(cloud, flags), len(centres), faces, len(views))
+
+
+def _ordered_pairs(count: int) -> list[tuple[int, int]]:
+    """Every ordered pair of ``count`` views."""
+    return [(i, j) for i in range(count) for j in range(count) if i != j]
+
+
+def _every_pair(views: list[View], trees: list[cKDTree]) -> dict[tuple[int, int], "_Pair"]:
+    """Where each view's points find the others' (``trees``: each view's k-d tree)."""
+    reaches = [_reach(tree) for tree in trees]
+    return {(i, j): _Pair.of(views[i], reaches[i], trees[j], reaches[j]) for i, j in _ordered_pairs(len(views))}
+
+
+def _overlapped(
+    views: list[View], pairs: dict[tuple[int, int], "_Pair"]
+) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    """Per view (in canonical order): which points the union keeps (not on an earlier view's
+    inside, nor one of its points again), which lie on an earlier view's inside, and which
+    boundary points no other view's inside covers."""
+    kept = [np.ones(len(view.points), bool) for view in views]
+    under = [np.zeros(len(view.points), bool) for view in views]
+    loose = [view.boundary.copy() for view in views]
+    for (i, j), pair in pairs.items():
+        inside = pair.near() & ~views[j].boundary[pair.nearest]
+        if j < i:  # a larger view's inside, or one of its points, is already there
+            kept[i] &= ~(inside | pair.near(DUPLICATE, nearer=True))
+            under[i] |= inside
+        loose[i] &= ~inside
+    return kept, under, loose
 
 
 def covered_views(views: list[View], pairs: dict[tuple[int, int], _Pair]) -> set[int]:
