@@ -47,8 +47,8 @@ INTERVAL_Z = 1.6449  # σ is calibrated so that union ± INTERVAL_Z·σ holds 90
 # The overlap shares tried for two operands whose share is not told (SpectralModels.union_profile,
 # /v1/retrieve, the card's retrieval table): two part spectra do not tell how much the parts
 # overlap, but a stored shape does, as the share under which the union comes nearest to it. Eleven
-# rank as well as 21 or 41 (top-1 74.4, 74.6, 74.6 % on the card's closed two-part union queries;
-# benchmarks/RESULTS.md, "share profile").
+# rank as well as 21 or 41 on the card's closed two-part union queries (benchmarks/RESULTS.md,
+# "share profile").
 PROFILE_SHARES = np.linspace(0.0, 1.0, 11)
 
 # The correspondence model (optional: served when present): each vertex of an uploaded part →

@@ -1,22 +1,23 @@
 """Admit or refuse an upload request when its headers arrive, before its body is read.
 
-Counting uploads once they were parsed meant an overloaded server first received every body:
-64 concurrent 0.46 MB uploads were refused after ~0.5 s each on an idle 2-core machine, and a
-two-file union could have its first file solved and its second refused. Here a request that
+Counting uploads once they were parsed meant an overloaded server first received every body
+before refusing it, and a two-file union could have its first file solved and its second
+refused. Here a request that
 carries a multipart body (every route that solves an upload takes one; a spectra-only form
 is one too and passes in milliseconds) is counted in on its headers, whole: at most
 ``capacity`` such requests are in flight (solving or waiting for a solver), and their bodies
 together stay under ``byte_budget``. A body is charged as its bytes arrive, after a reservation
 of at most :data:`RESERVATION_BYTES` on admission: charged its declared length (or the upload cap
-when chunked) up front, eight connections sending a byte every 5 s held the whole budget and
-every other upload was refused for a minute. The rest get 503 ``overloaded`` at once, their
+when chunked) up front, a few connections sending a byte now and then held the whole budget
+and every other upload was refused. The rest get 503 ``overloaded`` at once, their
 bodies unread, with a ``Retry-After`` of when the first request in flight is likely done
 (:class:`ServiceTimes`), and ``/metrics`` counts them by what was full.
 
 A place is one solve. A request is admitted on one place and takes one more for each further
 file it solves, once its form is read and before any solve starts (:func:`take_solves`), as far
-as places remain: a union of 32 files held one place and queued 32 solves, and an upload behind
-it waited 12 s; now it holds every place it can, and the uploads after it are refused at once.
+as places remain: a union of many files that held one place queued all its solves, and an
+upload behind it waited for them; now it holds every place it can, and the uploads after it are
+refused at once.
 An admitted request is never refused for its own size.
 A route that solves a shape of its own whatever its body holds (``/v1/reconstruct`` checks the
 body it rebuilt; a session's ``/body`` and ``/identity`` fit a body) is counted in the same way
@@ -54,7 +55,7 @@ class ServiceTimes:
         """Seconds until the first of the requests in flight (each ``elapsed`` seconds in) is
         likely done: for each, the median of how much longer the recent requests that ran longer
         than it has took; a request that has run longer than every recent one is a heavy one,
-        taken to need as long again (a fixed guess would be as wrong for a 5 s one as a 60 s one)."""
+        taken to need as long again (a fixed guess would be wrong for a short one or a long one)."""
         durations = np.asarray(self.recent, dtype=float)
         remaining = [float(np.median(durations[durations > e] - e)) if (durations > e).any() else e for e in elapsed]
         return min(remaining, default=0.0)

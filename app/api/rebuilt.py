@@ -24,18 +24,19 @@ from app.inference.models import SpectralModels, UnionEstimate
 from app.sessions.body import NoBodyFits, calibrated_sigma, fitted_views
 from app.sessions.fused import view_of_part
 
-# The rebuilt body's spectrum is within ~2 % of a complete body's and ~5 % of a two-part union's
-# on average (model card); a union of scans that leave part of the body unseen is ~80 % away.
+# The rebuilt body's spectrum comes back within a few per cent of a complete body's or a two-part
+# union's, and far from a union of scans that leave part of the body unseen (the model card's
+# reconstruction section).
 GAP_WARNING = 0.10
-# An open surface (λ₁ > 0) never comes back as the closed body's spectrum: unknown people's
-# complete scans with blind spots come back 11–45 % away (5th–95th percentile, the card's
-# blind_spots row) and decode to ~9–28 mm, a session's five views that miss a quarter of the
-# body 69–91 % (session_spectrum; ~75 mm), predicted two-part unions 1–17 %.
+# An open surface (λ₁ > 0) never comes back as the closed body's spectrum: complete scans with
+# blind spots come back tens of per cent away and still decode to a body near the truth, a
+# session's views that miss a quarter of the body much farther (the card's blind_spots and
+# session_spectrum rows): the warning sits between the two.
 OPEN_GAP_WARNING = 0.60
 # A predicted union (σ > 0) that is open is no measured scan with blind spots: the operator's
-# unions of two parts covering the body come back 1–21 % away (5th–95th percentile, Test A, 200
-# rows), its unions of parts that leave 10–30 % of the body out 26–65 % (median 29–49 %; less
-# than 70 % covered: 46–76 %). Over this the union leaves part of the body unseen.
+# unions of two parts covering the body come back nearer than its unions of parts that leave a
+# tenth or more of the body out (the card's reconstruction section, Test A). Over this the union
+# leaves part of the body unseen.
 PREDICTED_OPEN_GAP_WARNING = 0.25
 
 RoundTrip = Literal["closed", "open", "unseen", "fitted"]  # fitted: no round trip, the body fits the uploads' points

@@ -45,7 +45,7 @@ from app.sessions.fused import View
 from app.sessions.seen import seen_in_worker
 from app.sessions.solved import solved_union
 
-RETRY_AFTER_SECONDS = 1  # a solve takes ~0.1–0.3 s: a place frees within a second
+RETRY_AFTER_SECONDS = 1  # a solve takes a fraction of a second: a place frees within one
 _PRELOADED = ["app.geometry.pipeline", "app.inference.correspondence", "app.sessions.aligned"]
 _CONTEXT = multiprocessing.get_context("forkserver")
 
@@ -55,9 +55,9 @@ def _init_worker(limit_bytes: int) -> None:
 
     Allocations beyond the cap raise MemoryError in this worker only. One BLAS thread because
     the pool already runs a worker per core, and ARPACK's small dense products do not gain from
-    threads anyway: a region's spectrum took ~145 ms with OpenBLAS's default two threads and
-    ~125 ms with one, alone on an idle 2-core machine, and two workers each starting threads
-    on two cores made the batch build of the training data 12 % (spectra) to 3x (masks) slower.
+    threads anyway: a region's spectrum is faster on one thread than on OpenBLAS's default two,
+    even alone on an idle machine, and workers each starting threads on shared cores made the
+    batch build of the training data markedly slower.
     """
     threadpool_limits(limits=1)
     _map_blas_buffers()

@@ -1,7 +1,7 @@
 """What a text or PLY file declares, checked against what it holds, before a parser expands it.
 
 A parser's cost follows what the file says, not what it honestly contains: an ASCII PLY that
-declares three vertices and then carries 15 M lines took trimesh 42 s to read, an OFF with
+declares three vertices and then carries millions of lines held trimesh for tens of seconds, an OFF with
 fewer vertices than its header names was read as a different mesh, and trimesh reads a PLY
 face index of 1.5 as 1, an OBJ index 0 (OBJ counts from 1) as the last vertex, and a list
 count of −3 as no face at all. Each check here is a scan of the bytes (no parse), so a file
@@ -28,8 +28,8 @@ from app.geometry.formats import TEXT_TYPES
 FACES_PER_VERTEX = 4
 MAX_POLYGON_SIDES = 64  # a polygon is fanned into triangles; scanners write triangles and quads
 HEADER_BYTES = 65536
-MAX_SCENE_NODES = 1000  # a scan is a mesh or a few; trimesh took 0.8 s just to read 30 000 nodes
-SPARE_LINES = 64  # blank and comment lines tolerated beyond the declared rows, not 15 M of them
+MAX_SCENE_NODES = 1000  # a scan is a mesh or a few; tens of thousands of nodes are slow just to read
+SPARE_LINES = 64  # blank and comment lines tolerated beyond the declared rows, not millions of them
 MAX_COUNT_DIGITS = 10  # a longer count is past every cap; Python refuses int() past 4 300 digits
 # The longest line a text format's honest rows need: a 64-sided OBJ face of v/vt/vn triples, a
 # PLY row of a few dozen properties; a point row is x y z and a few attributes.

@@ -1,7 +1,7 @@
 """Intrinsic Delaunay triangulation by batched edge flips, and its cotangent operators.
 
-robust-laplacian computes the same matrices for any mesh, but on a 13 k-vertex body most of
-its ~100 ms goes into building its general (tufted, non-manifold-capable) mesh structure.
+robust-laplacian computes the same matrices for any mesh, but on a body-sized mesh most of its
+time goes into building its general (tufted, non-manifold-capable) mesh structure.
 For the common case, a consistently oriented manifold mesh whose triangles need no
 mollification, this module flips non-Delaunay edges in vectorized batches of edges that share
 no face, which gives the same intrinsic Delaunay triangulation (unique up to co-circular ties,

@@ -224,7 +224,7 @@ def _is_number(token: bytes) -> bool:
 def _flattened(scene: trimesh.Scene) -> trimesh.Trimesh:
     """The scene as one mesh. A scene of one mesh placed as it is (every PLY, STL, OFF and most
     OBJ uploads) is that mesh: ``to_mesh`` would copy, transform by the identity and concatenate
-    it, 3.5 of the 4.4 ms a 13 k-vertex body's PLY took to load."""
+    it, most of the time a body-sized PLY takes to load."""
     nodes = scene.graph.nodes_geometry
     if len(nodes) == 1:
         transform, name = scene.graph[nodes[0]]
@@ -235,8 +235,8 @@ def _flattened(scene: trimesh.Scene) -> trimesh.Trimesh:
 
 
 def _require_instances_within_caps(scene: trimesh.Scene, max_vertices: int) -> None:
-    """Count what flattening the scene would make before making it: a 1.4 MB GLB whose 30 000
-    nodes instance one mesh expands to 4.9 M vertices (24 s to the memory cap)."""
+    """Count what flattening the scene would make before making it: a small GLB whose tens of
+    thousands of nodes instance one mesh expands to millions of vertices, up to the memory cap."""
     vertices = faces = 0
     for name, nodes in scene.graph.geometry_nodes.items():
         geometry = scene.geometry.get(name)

@@ -21,7 +21,7 @@ from app.geometry.laplacian import Operators
 # under any eigenvalue of the shape but on its own scale, so the method is scale-equivariant.
 RELATIVE_SHIFT = 1e-2
 # ARPACK's relative tolerance on the shift-inverted Ritz values; 0 means machine precision. A
-# looser 1e-10 saved 17 % of the solves but took a member of the next cluster for the sphere's λ₂₀.
+# looser 1e-10 saved some solves but took a member of the next cluster for the sphere's λ₂₀.
 ARPACK_TOL = 0.0
 
 
@@ -31,10 +31,10 @@ class NoConvergence(SolverFailure):
 
 class Factor:
     """(C − σI)⁻¹ as a linear operator and, read from its pivots when asked (a copy of the factor:
-    ~1–3 ms on the 13 k body), how many eigenvalues of C lie below σ.
+    a few ms on a body-sized mesh), how many eigenvalues of C lie below σ.
 
     Moved to another shift (:meth:`move`), the factor keeps its ordering and symbolic analysis and
-    only refactors numerically: 4 ms against 13 ms on the 13 k body.
+    only refactors numerically, a fraction of a new factorization's cost (decision 024).
     """
 
     def __init__(self, upper: sp.csc_matrix, shift: float):

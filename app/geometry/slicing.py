@@ -28,12 +28,9 @@ import numpy as np
 from app.geometry.errors import SolverFailure
 from app.geometry.pencil import Factor, NoConvergence, ShiftedPencil
 
-# Eigenvalues ARPACK is asked for per slice, and the k from which slicing pays. Measured on the
-# 13 k body with one BLAS thread, as the service's solver workers run (ms, one solve / slices of
-# 32, best of 3, in turns): values alone k = 48 165 / 168, k = 64 255 / 207, k = 72 377 / 254,
-# k = 100 788 / 444, k = 200 2 363 / 845; with eigenfunctions k = 48 187 / 176, k = 64 315 / 234,
-# k = 128 1 107 / 488, k = 200 3 037 / 812 (slices of 16, 24, 40, 50: 5–40 % slower at k = 100
-# and 200; of 16 and 24 slower at k = 48 and 64 too).
+# Eigenvalues ARPACK is asked for per slice, and the k from which slicing pays: one solve and
+# slices of 16 to 50 measured side by side on the 13 k body, as the solver workers run
+# (``docs/decisions/047-eigenpairs-beyond-48-are-solved-in-slices-of-32.md``).
 SLICE_SIZE = 32
 SLICED_ABOVE = 48
 # Extra eigenvalues asked for around each interior shift, so that consecutive slices overlap.

@@ -29,8 +29,8 @@ MAX_EIGENVALUE = 1e15
 # Solvers return λ₁ of a closed surface as ±1e-12·λ_k, and ties as tiny inversions.
 ORDER_TOLERANCE = 1e-6
 # ARPACK's implicit restarts for one solve: body parts, whole bodies and camera views (as cut and
-# re-meshed) converge in 3–5; a long thin strip's nearly degenerate spectrum took 320 (63 s of a
-# worker) and is refused after these, a few seconds in, instead of holding a worker.
+# re-meshed) converge in a handful; a long thin strip's nearly degenerate spectrum took hundreds
+# (a worker held for a minute) and is refused after these, a few seconds in, instead.
 MAX_RESTARTS = 20
 
 

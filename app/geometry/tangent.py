@@ -38,7 +38,7 @@ class GradientStencil:
 
 def consistently_wound(faces: np.ndarray) -> bool:
     """Whether every edge shared by two faces is walked in opposite directions by them: no
-    directed edge twice (a sparse matrix sums repeats into one entry; 9x faster than np.unique)."""
+    directed edge twice (a sparse matrix sums repeats into one entry; many times faster than np.unique)."""
     half = half_edges(faces)
     n = int(faces.max()) + 1
     walked = sp.csr_matrix((np.ones(len(half), np.int32), (half[:, 0], half[:, 1])), shape=(n, n))
@@ -67,8 +67,8 @@ def facing_outward(points: np.ndarray, normals: np.ndarray, stiffness: sp.spmatr
     sums 2H over the area. Local, so it holds for any piece of a body however it is cut: on
     the anny parts the data build cuts (random regions and camera views, meshes and clouds, a
     thousand of each) it chose the outward side every time, where a signed volume with every
-    boundary loop capped erred on 7.5 % of camera views and a cloud's side "away from its
-    centroid" on 60 %.
+    boundary loop capped erred on some camera views and a cloud's side "away from its centroid"
+    on most (decision 018).
     """
     return float(np.einsum("ij,ij->", normals, stiffness @ points)) >= 0
 
@@ -79,7 +79,7 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     face_normals = np.cross(b - a, c - a)  # twice the area, so the sum is area-weighted
     corners = faces.T.reshape(-1)  # each face's first corners, then its second, then its third
     n = len(vertices)
-    # bincount adds in the order np.add.at would, corner by corner: the same sums, 2.5x faster.
+    # bincount adds in the order np.add.at would, corner by corner: the same sums, faster.
     normals = np.column_stack([np.bincount(corners, np.tile(face_normals[:, j], 3), minlength=n) for j in range(3)])
     return _unit(normals)
 

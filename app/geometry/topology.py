@@ -7,8 +7,8 @@ from scipy.sparse.csgraph import connected_components
 
 def row_sums(rows: np.ndarray) -> np.ndarray:
     """(m,) the sum of each row of an (m, 3) array, added left to right as ``sum(axis=1)`` adds
-    them (the same bits), column by column: NumPy reduces a short axis one row at a time, ~15×
-    slower on a mesh's (m, 3) arrays (0.77 ms against 0.04 for 49 k rows)."""
+    them (the same bits), column by column: NumPy reduces a short axis one row at a time, an
+    order of magnitude slower on a mesh's (m, 3) arrays."""
     return rows[:, 0] + rows[:, 1] + rows[:, 2]
 
 

@@ -28,8 +28,8 @@ from app.geometry.topology import (
 )
 
 # A surface edge has one face (boundary) or two; scans show a few non-manifold edges with 3–4.
-# robust-laplacian's assembly is quadratic in the faces around one edge (20 000 fins on an edge
-# of a disk took 8 s), so an edge shared by more faces than this is refused, not solved.
+# robust-laplacian's assembly is quadratic in the faces around one edge (tens of thousands of fins
+# on one edge hold a worker for seconds), so an edge shared by more faces than this is refused.
 MAX_FACES_PER_EDGE = 16
 # Point-cloud clusters (see _largest_cluster): neighbours looked at, and how far past the typical
 # neighbour distance a link may reach before two points belong to different clusters.
@@ -126,7 +126,7 @@ def prepare_cloud(cloud: PointCloud, *, k: int, closed: bool, boundary_indices: 
     flagged in the file, or listed.
 
     Automatic boundary detection is not attempted: angular-gap detectors flag interior points
-    wherever two surfaces nearly touch (fingers, armpits), with spectral errors over 100 %.
+    wherever two surfaces nearly touch (fingers, armpits), and the spectrum is then far off.
     """
     points = cloud.points
     require_scan_coordinates(points)
@@ -193,8 +193,9 @@ def _merge_duplicate_vertices(vertices: np.ndarray, faces: np.ndarray) -> tuple[
 
     A mesh without any (the usual case) comes back as it was, in its own vertex order: shown by
     one generic combination of the coordinates, which identical vertices share, taking as many
-    values as there are vertices (a sort of one column, 4x faster than the lexicographic sort of
-    all three that finds the duplicates otherwise, itself 5x faster than np.unique over rows).
+    values as there are vertices (a sort of one column, several times faster than the
+    lexicographic sort of all three that finds the duplicates otherwise, itself faster than
+    np.unique over rows).
     """
     combined = np.sort(vertices[:, 0] * _GENERIC[0] + vertices[:, 1] * _GENERIC[1] + vertices[:, 2] * _GENERIC[2])
     if not (combined[1:] == combined[:-1]).any():
@@ -229,9 +230,9 @@ def surface_faces(faces: np.ndarray) -> np.ndarray:
 def distinct_faces(faces: np.ndarray) -> np.ndarray:
     """Each triangle once, in the order first given, whatever its orientation or vertex order.
 
-    A repeated face is not more surface: it doubles its area in the mass matrix (λ₁ of a disk
-    rose 2 % with 5 000 copies of one face), and robust-laplacian's assembly is quadratic in
-    the copies (100 000 of them held a worker for minutes), so they go before assembly.
+    A repeated face is not more surface: it multiplies its area in the mass matrix (a disk's λ₁
+    moves with copies of one face), and robust-laplacian's assembly is quadratic in the copies
+    (a hundred thousand of them hold a worker for minutes), so they go before assembly.
     """
     if len(faces) < 2:
         return faces
@@ -239,7 +240,7 @@ def distinct_faces(faces: np.ndarray) -> np.ndarray:
     high = np.maximum(np.maximum(faces[:, 0], faces[:, 1]), faces[:, 2])
     ordered = np.column_stack([low, row_sums(faces) - low - high, high])  # each row sorted
     n = int(ordered.max()) + 1
-    if n**3 < 2**63:  # one int64 key per triangle: a sort instead of np.unique over rows (5x slower)
+    if n**3 < 2**63:  # one int64 key per triangle: a sort instead of np.unique over rows (several times slower)
         keys = (ordered[:, 0] * n + ordered[:, 1]) * n + ordered[:, 2]
         ranked = np.sort(keys)
         if not (ranked[1:] == ranked[:-1]).any():

@@ -45,7 +45,7 @@ SCALE_ITERATIONS = 3
 BOUNDARY_WEIGHT = 0.2
 # A template vertex's covered share is that density at the part's scale over the full density,
 # capped at 1: per-body-part coverage sums it, not the region. The region counts the whole area
-# between a ragged view's strips (its coverage 4 points too high on camera views), the density
+# between a ragged view's strips (its coverage points too high on camera views), the density
 # alone leaves a compact part's interior short of full where the heat step carried its outline's
 # area out. The full density grows with how ragged the part is, the share of its area on its
 # boundary vertices (a ragged view's density spills into its gaps): FULL_DENSITY +
@@ -62,14 +62,13 @@ TELL_BELOW_KEY = "tell_overlap_below"
 # The graph's metadata key: a part whose area-weighted mean place confidence is below this value
 # is answered with a warning that its places are uncertain, chosen at export as the lowest
 # percentile of the validation pairs' parts (0: never). A part's mean confidence tracks its
-# region's IoU (correlation 0.9 on validation draws), and shapes that are no body part (a plane,
-# a torus, a capsule) are placed with a sixth to a third of a body part's.
+# region's IoU on validation draws, and shapes that are no body part (a plane, a torus, a
+# capsule) are placed with a fraction of a body part's.
 UNCERTAIN_BELOW_KEY = "uncertain_below_confidence"
 # A body part's places keep its area: carried to the template, it covers a region of about its
-# own area over the person's scale squared (0.73–1.09 of it on calibration people's views and
-# regions; a 2.4 m adult would be 0.5). A shape that is no body part can be placed confidently
-# and still crowd its places onto a spot: a closed ball of 10 cm lands on 9 % of its area at
-# confidence 0.84. Below this share its places are doubted whatever their confidence
+# own area over the person's scale squared (a 2.4 m adult would be at half of it). A shape that
+# is no body part can be placed confidently and still crowd its places onto a spot (a small
+# closed ball). Below this share its places are doubted whatever their confidence
 # (docs/decisions/040-a-part-whose-places-crowd-is-no-body-part.md).
 CROWDED_BELOW = 0.5
 

@@ -152,7 +152,7 @@ def chained_sigma(inner: np.ndarray, inner_sigma: np.ndarray, union: np.ndarray,
     moves the next union with it (where nothing is added the union *is* the inner union). So the
     inner union's relative σ is carried to the new union and added to the step's σ as an
     independent error. Without it a session's σ was the last step's alone, and the 90 % interval
-    held 41–77 % of the truths of chains of 5–3 camera views. Arrays of the same shape, 1/m².
+    held far fewer of the truths of chains of camera views. Arrays of the same shape, 1/m².
     """
     relative = inner_sigma / np.maximum(np.abs(inner), np.maximum(inner_sigma, 1e-12))  # ≤ 1, finite at λ = 0
     return np.sqrt(sigma**2 + (relative * union) ** 2)

@@ -75,5 +75,5 @@ def _lengths(vectors: np.ndarray) -> np.ndarray:
 
 
 def _edge_vectors(coordinates: np.ndarray, first: np.ndarray, second: np.ndarray) -> np.ndarray:
-    """(3, m) each edge's vector, gathered row by row (a 2-D fancy index is ~6x slower)."""
+    """(3, m) each edge's vector, gathered row by row (a 2-D fancy index is several times slower)."""
     return np.stack([row[first] - row[second] for row in coordinates])

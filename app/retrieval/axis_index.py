@@ -68,7 +68,7 @@ class AxisIndex:
         axis, and keeps those rounding could place within reach of it in distance: a row in the
         top is within reach of the query it is nearest to. The few kept are then ranked exactly.
         (A share profile's 11 spectra lie apart on the axis: one product of all 11 over every
-        row within reach of any measured 5× more.)"""
+        row within reach of any measured several times more.)"""
         if len(self) == 0:
             return merged([], top)
         asked = features(queries)

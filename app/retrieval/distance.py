@@ -13,10 +13,10 @@ from threadpoolctl import ThreadpoolController
 
 FLOOR = 1e-9
 # Stored rows ranked per matrix product in top_matches: blocks that stay in cache (11 profile
-# queries × 2¹² rows, 0.4 MB), where all of 10⁶ rows at once were 88 MB of temporaries, twice.
+# queries × 2¹² rows, 0.4 MB), where all of 10⁶ rows at once were ~90 MB of temporaries, twice.
 # 2¹² to 2¹⁶ rows measured alike for one query; 2¹² best for a profile's 11 (one BLAS thread).
 BLOCK_ROWS = 1 << 12
-SINGLE_BLOCK_ROWS = 1 << 16  # one query: a matrix-vector product per block (10.4 ms over 10⁶ rows)
+SINGLE_BLOCK_ROWS = 1 << 16  # one query: a matrix-vector product per block
 # Rows sampled for top_matches' bound: ~top / SAMPLE_ROWS of all rows are then measured exactly.
 SAMPLE_ROWS = 4096
 BLAS = ThreadpoolController()  # products on one BLAS thread (top_matches says why)
@@ -60,12 +60,12 @@ def top_matches(
     their index, the stable order; rows kept in another order pass their keys).
 
     Why not :func:`nearest_of` and a sort: its differences take a pass over every stored row per
-    query, and a stable sort of every distance took ~0.2 s at 10⁶ rows. Here one matrix product
+    query, and a stable sort of every distance is slow at 10⁶ rows. Here one matrix product
     ranks every row by |f|² − 2 f·q + |q|², which float64 rounding moves by less than ``slack``
     from the true squared distance; only rows that rounding could have kept out of the top are
     then measured by differences and sorted (distance, then row: the stable order). The products
     run on one BLAS thread: a block's is too small to share, and with both cores busy (the solver
-    workers' work) OpenBLAS's two threads made a query over 10⁶ rows 115 ms instead of 15.
+    workers' work) OpenBLAS's two threads made a query over 10⁶ rows several times slower.
     """
     asked = features(queries)
     asked_squared = (asked**2).sum(axis=1)[:, None]

@@ -1,7 +1,7 @@
 """The stored shapes' retrieval features in memory, kept in step with the database.
 
-Reading every stored spectrum back at every query cost ~5 µs a row (SQLite: 0.5 s at 10⁵ shapes),
-and PostgreSQL's 19-dimensional GiST index pruned poorly at 10⁶ (p99 52 ms). Both stores now rank
+Reading every stored spectrum back at every query costs a pass over the database, and
+PostgreSQL's 19-dimensional GiST index pruned poorly at 10⁶ shapes. Both stores now rank
 from this copy (:class:`app.retrieval.axis_index.AxisIndex` and
 :func:`app.retrieval.distance.top_matches`), and read from the database only what changed since
 their last query.
@@ -18,12 +18,12 @@ from app.retrieval.distance import Ranked, features, top_matches
 
 # Rows added since the index was built are scanned whole by every query, and rows deleted since
 # are carried unanswered, until together they are more than this many, or this share of the
-# index; the index is then built again (a sort of every row: ~0.25 s at 10⁶, once per 6·10⁴
-# rows added or deleted there).
+# index; the index is then built again (a sort of every row, once per 6·10⁴ rows added or
+# deleted at 10⁶).
 TAIL_ROWS = 1 << 14
 TAIL_SHARE = 1 / 16
 # The deletions the database's log keeps (a few MB), and so each copy's: a copy that last read
-# the log before the oldest of them reads every row again (an open: ~3 s at 10⁶ rows) instead of
+# the log before the oldest of them reads every row again (as an open does) instead of
 # the deletions since; a query whose snapshot is older reads its snapshot whole.
 DELETIONS_KEPT = 100_000
 

@@ -2,14 +2,14 @@
 
 k-NN is ranked in each replica from an in-memory copy of the stored features
 (:mod:`app.retrieval.feature_copy`), exactly as SQLite's: the 19-dimensional ``cube`` GiST index
-this store used before pruned poorly (p99 52 ms at 10⁶ shapes, 408 ms for a share profile). The
+this store used before pruned poorly at 10⁶ shapes, worst for a share profile. The
 copy reads the rows past the last ``seq`` it has, so every insert takes one advisory lock first:
 rows then become visible in ``seq`` order, which a reader's snapshot can trust; deletions are
 logged by a trigger under the same lock, and the tables' oids tell recreated ones. Schema changes
 are made on start-up (the earlier ``features`` column and its index are dropped).
 
-Connections are reused (:class:`IdleConnections`): opening one costs ~10 ms on loopback, as
-much as a k-NN over 10⁵ shapes. Each operation takes an idle connection or opens one, runs as
+Connections are reused (:class:`IdleConnections`): opening one, even on loopback, costs as much
+as a k-NN over 10⁵ shapes. Each operation takes an idle connection or opens one, runs as
 one transaction, and gives it back, so threads share the store safely.
 """
 
@@ -245,7 +245,7 @@ class _PostgresRows(DeletionLog):
 
     def spectra_after(self, key: int) -> tuple[np.ndarray, np.ndarray]:
         """Read in PostgreSQL's binary array format (``array_send``) and decoded by numpy at once:
-        as Python lists of floats, 10⁶ rows took 16 s; decoded row by row, 4 s."""
+        as Python lists of floats, or decoded row by row, 10⁶ rows took many times longer."""
         query = "SELECT seq, array_send(spectrum) FROM shapes WHERE seq > %s ORDER BY seq"
         rows = self._connection.execute(query, (key,)).fetchall()
         keys = np.array([row[0] for row in rows], dtype=np.int64)

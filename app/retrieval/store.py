@@ -151,7 +151,7 @@ class SQLiteStore:
             connection.execute("PRAGMA journal_mode=WAL")
             for statement in SCHEMA:
                 connection.execute(statement)
-        with self._connect() as connection:  # read the features now, not in the first query (~3 s at 10⁶ rows)
+        with self._connect() as connection:  # read the features now, not in the first query
             self._copy.synced(_SQLiteRows(connection))
 
     @contextmanager
@@ -294,7 +294,7 @@ class _SQLiteRows(DeletionLog):
 
     def spectra_after(self, key: int) -> tuple[np.ndarray, np.ndarray]:
         """The blobs decoded at once (every stored spectrum has the store's k): one array per row
-        was a third of an open's 3 s at 10⁶ rows."""
+        was a third of an open's time at 10⁶ rows."""
         rows = self._connection.execute(
             "SELECT rowid, spectrum FROM shapes WHERE rowid > ? ORDER BY rowid", (key,)
         ).fetchall()

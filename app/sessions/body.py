@@ -24,7 +24,7 @@ from app.sessions.aligned import aligned_views
 from app.sessions.fused import View, view_of_part
 from app.sessions.session import SessionView
 
-FIT_POINTS = 4000  # the points a fit reads: its cost, about 3 s on one core
+FIT_POINTS = 4000  # the points a fit reads, which set its cost
 MAX_POSES = 8  # views fitted each in a pose of its own, at most: each adds 96 unknowns to the fit
 MAX_RESIDUAL_M = 0.05  # a fit whose points stay further at the median is no body (sessions: 2–26 mm, a 10 cm ball 96)
 SAMPLES = 16  # posterior bodies an interval is read from

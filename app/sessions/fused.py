@@ -380,7 +380,7 @@ def fused_spectrum(
         return glued_spectrum(cloud.points, cloud.faces, cloud.boundary, k)
     closed = not cloud.boundary.any()
     # Centred: robust-laplacian's point-cloud Laplacian drifts with the distance from the origin
-    # (a unit sphere's λ₁ 5 % low 10 m out), and a session's frame is wherever its scanner put it.
+    # (a unit sphere's λ₁ comes out low far from it), and a session's frame is wherever its scanner put it.
     centred = cloud.points - cloud.points.mean(axis=0)
     shape = PointCloud(centred, None if closed else cloud.boundary)
     return np.asarray(cloud_spectrum(shape, SpectrumOptions(k=k, closed=closed)).eigenvalues)

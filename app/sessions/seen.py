@@ -1,16 +1,16 @@
 """Which of a fused union's boundary points lie deep inside what the session saw, by the body
 fitted to its views.
 
-The fused union's boundary is decided point by point from the views' geometry (:mod:`app.
-sessions.fused`), and on a session that nearly closes around the body a few dozen points held at
-zero where views meet, far from any true hole, lift every eigenvalue (24 views: two sessions in
-six 31–47 % off). Whether a stretch of surface was seen is what the template knows: the body
-fitted to the views' points (:mod:`app.inference.bodyfit`, a few mm off where they lie) is drawn
-onto them vertex by vertex, each point claims its nearest template vertex, and the vertices
-claimed are the template region the session saw. A boundary point is freed where its vertex lies
-:data:`DEPTH` rings or more inside that region: a ring or two of doubt where the region's edge
-runs (a slit between views the truth keeps, a vertex claimed by its neighbour's point) cannot
-free it, and where the session saw too little for a body, or no body fits, nothing is freed
+The fused union's boundary is decided point by point from the views' geometry
+(:mod:`app.sessions.fused`), and on a session that nearly closes around the body a few dozen
+points held at zero where views meet, far from any true hole, lift every eigenvalue. Whether a
+stretch of surface was seen is what the template knows: the body fitted to the views' points
+(:mod:`app.inference.bodyfit`, a few mm off where they lie) is drawn onto them vertex by vertex,
+each point claims its nearest template vertex, and the vertices claimed are the template region
+the session saw. A boundary point is freed where its vertex lies :data:`DEPTH` rings or more
+inside that region: a ring or two of doubt where the region's edge runs (a slit between views the
+truth keeps, a vertex claimed by its neighbour's point) cannot free it, and where the session saw
+too little for a body, or no body fits, nothing is freed
 (``docs/decisions/043-a-boundary-point-deep-inside-the-seen-template-is-freed.md``).
 """
 
