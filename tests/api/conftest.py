@@ -9,7 +9,9 @@ from fastapi.testclient import TestClient
 from app.contract import SESSIONS_FILE
 from app.core.config import Settings
 from app.inference.manifest import write_manifest
+from app.inference.template import Template
 from app.main import create_app
+from app.samples import PARTS, template_part
 
 UPLOAD_CAP = 2_000_000
 API_KEY = "test-key-0123456789"
@@ -50,3 +52,19 @@ def chain_client(tmp_path_factory):
     settings = settings_without(tmp_path_factory.mktemp("chain"), SESSIONS_FILE)
     with TestClient(create_app(settings)) as test_client:
         yield test_client
+
+
+@pytest.fixture(scope="module")
+def template() -> Template:
+    return Template.load(Settings().models_dir)
+
+
+@pytest.fixture(scope="module")
+def samples(template) -> dict[str, bytes]:
+    """The README's sample parts, cut from the template."""
+    return {name: template_part(template, removed) for name, removed in PARTS.items()}
+
+
+def correspond(client, name: str, data: bytes, **params):
+    """One upload placed by ``POST /v1/correspondence``."""
+    return client.post("/v1/correspondence", params=params, files={"file": (name, data)})

@@ -16,36 +16,21 @@ from fastapi.testclient import TestClient
 from scipy.spatial.transform import Rotation
 
 from app.contract import CORRESPONDENCE_FILE
-from app.core.config import Settings
-from app.inference.template import PART_NAMES, Template
+from app.inference.template import PART_NAMES
 from app.main import create_app
-from app.samples import PARTS, template_part
-from tests.api.conftest import settings_for, settings_without
+from app.samples import PARTS
+from tests.api.conftest import correspond, settings_for, settings_without
 from tests.api.test_spectrum_api import assert_problem
 from tests.builders import ascii_ply
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
 
-@pytest.fixture(scope="module")
-def template() -> Template:
-    return Template.load(Settings().models_dir)
-
-
-@pytest.fixture(scope="module")
-def samples(template) -> dict[str, bytes]:
-    return {name: template_part(template, removed) for name, removed in PARTS.items()}
-
-
-def _correspond(client, name: str, data: bytes, **params):
-    return client.post("/v1/correspondence", params=params, files={"file": (name, data)})
-
-
 def test_a_template_part_is_placed_on_itself(client, samples, template):
     """Each vertex of a part cut from the template lands near itself, and the region it covers
     leaves out the body parts it lacks."""
     name = "no_head_neck.ply"
-    answer = _correspond(client, name, samples[name])
+    answer = correspond(client, name, samples[name])
     assert answer.status_code == 200, answer.text
     body = answer.json()
     mesh = trimesh.load(io.BytesIO(samples[name]), file_type="ply", process=False)
@@ -65,8 +50,8 @@ def test_relaxed_places_lie_closer_to_the_truth_and_say_so(client, samples):
     network's: 2.0 → 1.4 cm on average on the README's part."""
     name = "no_left_forearm_hand.ply"
     mesh = trimesh.load(io.BytesIO(samples[name]), file_type="ply", process=False)
-    network = _correspond(client, name, samples[name]).json()
-    relaxed = _correspond(client, name, samples[name], places="relaxed").json()
+    network = correspond(client, name, samples[name]).json()
+    relaxed = correspond(client, name, samples[name], places="relaxed").json()
     assert (network["places"], relaxed["places"]) == ("network", "relaxed")
     assert relaxed["vertex_indices"] == network["vertex_indices"]
     truth = np.asarray(mesh.vertices)[np.array(relaxed["vertex_indices"])]
@@ -74,7 +59,7 @@ def test_relaxed_places_lie_closer_to_the_truth_and_say_so(client, samples):
         np.linalg.norm(np.array(body["position"]) - truth, axis=1).mean() for body in (network, relaxed)
     )
     assert relaxed_error < 0.8 * network_error
-    arrays = np.load(io.BytesIO(_correspond(client, name, samples[name], places="relaxed", format="npz").content))
+    arrays = np.load(io.BytesIO(correspond(client, name, samples[name], places="relaxed", format="npz").content))
     assert str(arrays["places"]) == "relaxed"
     np.testing.assert_allclose(arrays["position"], relaxed["position"], atol=1e-4)
 
@@ -86,7 +71,7 @@ def test_a_service_with_a_smaller_budget_answers_every_vertex_through_a_coarser_
     name = "no_head_neck.ply"
     settings = settings_for(tmp_path / "shapes.sqlite").model_copy(update={"placed_vertices": 2_000})
     with TestClient(create_app(settings)) as coarse:
-        body = _correspond(coarse, name, samples[name]).json()
+        body = correspond(coarse, name, samples[name]).json()
     mesh = trimesh.load(io.BytesIO(samples[name]), file_type="ply", process=False)
     truth = np.asarray(mesh.vertices)[np.array(body["vertex_indices"])]
     assert body["vertices"] == len(body["position"]) == len(mesh.vertices)
@@ -103,8 +88,8 @@ def test_frame_units_and_winding_do_not_move_the_places(client, samples):
     turn = Rotation.from_euler("xyz", [0.3, 2.0, -1.2]).as_matrix()
     moved = (np.asarray(mesh.vertices) @ turn.T + [0.4, -1.0, 2.0]) * 100.0
     upload = ascii_ply(moved, np.asarray(mesh.faces)[:, ::-1])
-    before = _correspond(client, name, samples[name]).json()
-    after = _correspond(client, "moved.ply", upload, units="cm").json()
+    before = correspond(client, name, samples[name]).json()
+    after = correspond(client, "moved.ply", upload, units="cm").json()
     assert after["vertex_indices"] == before["vertex_indices"]
     np.testing.assert_allclose(after["position"], before["position"], atol=2e-3)
     assert after["region"]["vertices"] == before["region"]["vertices"]
@@ -112,13 +97,13 @@ def test_frame_units_and_winding_do_not_move_the_places(client, samples):
 
 def test_npz_and_ply_carry_what_the_json_says(client, samples):
     name = "no_head_neck.ply"
-    body = _correspond(client, name, samples[name]).json()
-    arrays = np.load(io.BytesIO(_correspond(client, name, samples[name], format="npz").content), allow_pickle=False)
+    body = correspond(client, name, samples[name]).json()
+    arrays = np.load(io.BytesIO(correspond(client, name, samples[name], format="npz").content), allow_pickle=False)
     np.testing.assert_allclose(arrays["position"], body["position"], atol=1e-4)
     np.testing.assert_array_equal(arrays["template_vertex"], body["template_vertex"])
     np.testing.assert_array_equal(arrays["region"], body["region"]["vertices"])
     assert int(arrays["placed_on"]) == body["placed_on"] < body["vertices"]  # 9 045 vertices, read through a copy
-    ply = _correspond(client, name, samples[name], format="ply")
+    ply = correspond(client, name, samples[name], format="ply")
     assert ply.headers["content-type"] == "application/ply"
     coloured = trimesh.load(io.BytesIO(ply.content), file_type="ply", process=False)
     assert len(coloured.vertices) == body["vertices"]
@@ -131,7 +116,7 @@ def test_localize_of_uploads_is_the_union_of_their_regions(client, samples):
     body = answer.json()
     assert body["located_by"] == "correspondence"
     assert len(body["vertex_confidence"]) == len(body["vertices"])
-    each = [set(_correspond(client, name, data).json()["region"]["vertices"]) for name, data in samples.items()]
+    each = [set(correspond(client, name, data).json()["region"]["vertices"]) for name, data in samples.items()]
     assert set(body["vertices"]) == each[0] | each[1]
     spectra = json.dumps([operand["eigenvalues"] for operand in body["operands"]])
     by_spectrum = client.post("/v1/localize", data={"spectra": spectra}).json()
@@ -160,82 +145,16 @@ def test_union_of_uploads_measures_its_overlap_and_a_told_one_wins(chain_client,
     ],
 )
 def test_bad_uploads_get_a_problem(client, data, status):
-    answer = _correspond(client, "bad.ply", data)
+    answer = correspond(client, "bad.ply", data)
     assert answer.status_code == status
     assert answer.headers["content-type"] == "application/problem+json"
-
-
-def _ply(mesh: trimesh.Trimesh) -> bytes:
-    return ascii_ply(np.asarray(mesh.vertices), np.asarray(mesh.faces))
-
-
-# Shapes no human scan is part of (sizes of a body's): the graph places them far less certainly
-# than the least certain held-out body parts, or crowds their places onto a spot (a closed 10 cm
-# ball is placed with confidence 0.84, on 9 % of its area).
-NOT_BODY_PARTS = {
-    "torus.ply": trimesh.creation.torus(0.2, 0.05, major_sections=64, minor_sections=32),
-    "capsule.ply": trimesh.creation.capsule(0.4, 0.05, count=[32, 32]),
-    "ball.ply": trimesh.creation.icosphere(4, 0.3),
-    "small-ball.ply": trimesh.creation.icosphere(4, 0.1),
-}
-
-
-@pytest.mark.parametrize("name", sorted(NOT_BODY_PARTS))
-def test_a_shape_that_is_no_body_part_is_warned_and_covers_nothing(client, name):
-    """A torus, a capsule or a ball is still answered (a statue is not refused), warned that its
-    places cannot be trusted, its region empty, no body part covered, and no token: a token would
-    carry a made-up region into later unions."""
-    answer = _correspond(client, name, _ply(NOT_BODY_PARTS[name])).json()
-    assert any("not part of a human body" in warning for warning in answer["warnings"])
-    assert any("left out of coverage" in warning for warning in answer["warnings"])
-    region = answer["region"]
-    assert region["vertices"] == [] and region["area_fraction"] == 0.0 and region["token"] is None
-    assert set(region["part_coverage"].values()) == {0.0}
-    assert answer["placed_on"] == answer["vertices"]  # small enough to be read itself
-
-
-def test_a_shape_that_is_no_body_part_takes_no_part_in_a_localization(client, samples):
-    """A body part and a ball localized together: the region is the body part's alone, and the
-    step that adds the ball is not told an overlap measured with a region nobody knows."""
-    name, data = next(iter(samples.items()))
-    files = [("files", (name, data)), ("files", ("small-ball.ply", _ply(NOT_BODY_PARTS["small-ball.ply"])))]
-    both = client.post("/v1/localize", files=files).json()
-    alone = _correspond(client, name, data).json()["region"]
-    assert both["located_by"] == "correspondence"
-    assert set(both["vertices"]) == set(alone["vertices"])
-    assert both["part_coverage"] == pytest.approx(alone["part_coverage"])
-    union = client.post("/v1/union", files=files).json()
-    assert union["overlaps_told"] == [False]
-    assert any(w.startswith("files[1] small-ball.ply") and "not part of a human body" in w for w in union["warnings"])
-
-
-def test_parts_of_the_template_body_are_placed_without_a_warning(client, samples):
-    below = client.app.state.resources.require_models().correspondence.uncertain_below
-    for sample, data in samples.items():
-        placed = _correspond(client, sample, data).json()
-        assert placed["mean_confidence"] >= below and placed["warnings"] == []
-
-
-@pytest.mark.parametrize("uncertain_below", [0.0, 1.01])
-def test_a_union_names_the_upload_whose_places_are_uncertain(client, samples, uncertain_below):
-    """Below the graph's threshold the union's warnings name each upload whose places are
-    uncertain (every place is, below 1.01), and at 0 none."""
-    correspondence = client.app.state.resources.require_models().correspondence
-    kept, correspondence.uncertain_below = correspondence.uncertain_below, uncertain_below
-    try:
-        files = [("files", (name, data)) for name, data in samples.items()]
-        warnings = client.post("/v1/union", files=files).json()["warnings"]
-    finally:
-        correspondence.uncertain_below = kept
-    doubted = [w.split(":")[0] for w in warnings if "its places on the template are uncertain" in w]
-    assert doubted == ([f"files[{i}] {name}" for i, name in enumerate(samples)] if uncertain_below > 1 else [])
 
 
 def test_without_the_graph_the_service_answers_as_before(tmp_path, samples):
     settings = settings_without(tmp_path, CORRESPONDENCE_FILE)
     with TestClient(create_app(settings)) as client:
         name = "no_head_neck.ply"
-        missing = _correspond(client, name, samples[name])
+        missing = correspond(client, name, samples[name])
         assert missing.status_code == 501
         assert missing.json()["type"] == "/problems/correspondence-unavailable"
         files = [("files", (n, d)) for n, d in samples.items()]
@@ -246,7 +165,7 @@ def test_without_the_graph_the_service_answers_as_before(tmp_path, samples):
 def test_spectra_sent_with_their_regions_are_placed_as_their_uploads(chain_client, samples):
     """A session's parts sent back as spectra with the region tokens /v1/correspondence gave are
     localized and united exactly as the uploads are."""
-    placed = [_correspond(chain_client, name, data).json() for name, data in samples.items()]
+    placed = [correspond(chain_client, name, data).json() for name, data in samples.items()]
     form = {
         "spectra": json.dumps([part["eigenvalues"] for part in placed]),
         "regions": json.dumps([part["region"]["token"] for part in placed]),
@@ -286,7 +205,7 @@ def test_bad_regions_get_a_problem_naming_them(client, regions, detail):
 def test_a_token_is_read_only_beside_the_spectrum_it_was_issued_for(client, samples):
     """Tokens swapped between two placed parts, an unsigned one of an earlier format and one with a
     changed byte are each refused (422 untrusted-region), not read as another part's region."""
-    first, second = [_correspond(client, name, data).json() for name, data in samples.items()][:2]
+    first, second = [correspond(client, name, data).json() for name, data in samples.items()][:2]
     spectra = json.dumps([first["eigenvalues"], second["eigenvalues"]])
     token = first["region"]["token"]
     body, _, tag = token.partition(".")
@@ -366,7 +285,7 @@ def test_an_upload_beside_a_spectrum_sent_with_its_region_is_placed_as_both_uplo
     """A session's next scan uploaded beside the earlier one's spectrum and region token: the same
     region and union as both uploaded together."""
     (first, data_a), (second, data_b) = samples.items()
-    earlier = _correspond(chain_client, second, data_b).json()
+    earlier = correspond(chain_client, second, data_b).json()
     form = {"spectra": json.dumps([earlier["eigenvalues"]]), "regions": json.dumps([earlier["region"]["token"]])}
     mixed = chain_client.post("/v1/localize", files=[("files", (first, data_a))], data=form)
     assert mixed.status_code == 200, mixed.text
@@ -388,7 +307,7 @@ def test_uploads_are_placed_in_the_solver_worker_not_the_api_process(chain_clien
     process's own graph unusable, a part is still placed, and a union of two still measured."""
     monkeypatch.setattr(chain_client.app.state.resources.require_models().correspondence, "graph", _NoGraphHere())
     name = "no_head_neck.ply"
-    placed = _correspond(chain_client, name, samples[name])
+    placed = correspond(chain_client, name, samples[name])
     assert placed.status_code == 200, placed.text
     files = [("files", (n, samples[n])) for n in PARTS]
     united = chain_client.post("/v1/union", files=files)
@@ -414,8 +333,8 @@ def test_coverage_alone_is_the_full_answer_without_its_per_vertex_arrays(client,
     """detail=coverage: the same answer less every per-vertex array (absent, not empty), a small
     fraction of its size."""
     name, data = next(iter(samples.items()))
-    full = _correspond(client, name, data)
-    short = _correspond(client, name, data, detail="coverage")
+    full = correspond(client, name, data)
+    short = correspond(client, name, data, detail="coverage")
     assert short.status_code == 200 and len(short.content) * 10 < len(full.content)
     whole, brief = full.json(), short.json()
     for field in ("vertex_indices", "template_vertex", "position", "confidence"):
@@ -430,4 +349,4 @@ def test_coverage_alone_is_the_full_answer_without_its_per_vertex_arrays(client,
     )
     assert "vertices" not in brief and "vertex_confidence" not in brief
     assert brief["part_coverage"] == located["part_coverage"] and brief["eigenvalues"] == located["eigenvalues"]
-    assert_problem(_correspond(client, name, data, detail="vertices"), 422, "invalid-request")
+    assert_problem(correspond(client, name, data, detail="vertices"), 422, "invalid-request")

@@ -23,7 +23,7 @@ from app.geometry.shapes import Mesh
 from app.geometry.topology import drop_unreferenced
 from app.inference.body import body_height, spectrum_gap, surface_area
 from app.inference.manifest import write_manifest
-from app.inference.template import PART_NAMES, Template
+from app.inference.template import PART_NAMES
 from app.main import create_app
 from app.samples import PARTS as SAMPLE_PARTS
 from app.samples import template_part
@@ -33,11 +33,6 @@ from training.reconstruction.blind_spots import above_soles
 from training.reconstruction.evaluate import rigidly_aligned
 
 PROBLEM = "application/problem+json"
-
-
-@pytest.fixture(scope="module")
-def template() -> Template:
-    return Template.load(Settings().models_dir)
 
 
 @pytest.fixture(scope="module")

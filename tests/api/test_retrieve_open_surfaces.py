@@ -14,22 +14,16 @@ import trimesh
 from fastapi.testclient import TestClient
 
 from app.contract import BOUNDARY_RATIO, RECONSTRUCTION_FILE
-from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
 from app.geometry.topology import drop_unreferenced
-from app.inference.template import PART_NAMES, Template
+from app.inference.template import PART_NAMES
 from app.main import create_app
 from tests.api.conftest import API_KEY, settings_without
 from tests.api.test_union_api import LEGS
 from training.reconstruction.blind_spots import above_soles
 
 LABEL = "the-template"
-
-
-@pytest.fixture(scope="module")
-def template() -> Template:
-    return Template.load(Settings().models_dir)
 
 
 @pytest.fixture(scope="module")

@@ -121,7 +121,16 @@ def _drop_one_at_a_time(
 def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(base, scans, browser):
     _drop_one_at_a_time(browser, base, scans)
 
-    expected = _expected_region(base, scans)
+    _shows_coverage_and_what_is_missing(browser, _expected_region(base, scans))
+    _shows_the_spectra_and_the_body(browser, len(scans))
+    _shows_each_person_once(browser, base, scans)
+    _shows_the_rebuilt_body(browser, base, scans)
+    if os.environ.get("SESSION_SCREENSHOT"):
+        browser.save_screenshot(os.environ["SESSION_SCREENSHOT"])
+
+
+def _shows_coverage_and_what_is_missing(browser, expected: dict) -> None:
+    """The page's per-part coverage is the service's, and it names the parts under half covered."""
     shown = {
         item.get_attribute("data-part"): float(item.get_attribute("data-coverage"))
         for item in browser.find_elements(By.CSS_SELECTOR, "#coverage li")
@@ -135,8 +144,11 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
     assert unseen and "torso" not in unseen  # the model's answer, which the page must show
     assert browser.find_element(By.ID, "missing").text == f"Still missing: {', '.join(unseen)}."
 
+
+def _shows_the_spectra_and_the_body(browser, parts: int) -> None:
+    """One curve per part, the union's with its band, and the body drawn in its two colours."""
     plot = browser.find_element(By.ID, "plot")
-    assert len(plot.find_elements(By.CSS_SELECTOR, "polyline.part")) == len(scans)
+    assert len(plot.find_elements(By.CSS_SELECTOR, "polyline.part")) == parts
     assert len(plot.find_elements(By.CSS_SELECTOR, "polyline.union")) == 1
     assert len(plot.find_elements(By.CSS_SELECTOR, "polygon.band")) == 1
     canvas = browser.find_element(By.ID, "body")
@@ -145,6 +157,10 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
     reddish = (pixels[:, 0] > pixels[:, 1] + 60).mean()
     greyish = ((np.ptp(pixels, axis=1) < 12) & (pixels[:, 0] < 225) & (pixels[:, 0] > 60)).mean()
     assert reddish > 0.02 and greyish > 0.001  # covered and missing, in their two colours
+
+
+def _shows_each_person_once(browser, base: str, scans: list[Path]) -> None:
+    """The matches list each person once, in the service's order, with its ranking's note."""
     found = httpx.post(f"{base}/v1/retrieve", params={"top": 25}, data=_session_form(base, scans), timeout=60)
     people: dict[str, list[dict]] = {}  # each person once, where their nearest stored shape ranks
     for match in found.json()["matches"]:
@@ -161,6 +177,10 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
     assert matches_note.get_attribute("data-ranked-by") == found.json()["ranked_by"]
     assert matches_note.text.startswith(" ".join(found.json()["warnings"]))
     assert ("explains it best" in matches_note.text) == (found.json()["ranked_by"] == "share_profile")
+
+
+def _shows_the_rebuilt_body(browser, base: str, scans: list[Path]) -> None:
+    """The rebuilt body drawn, with the height and round-trip verdict the service answers."""
     rebuilt = httpx.post(
         f"{base}/v1/reconstruct", params={"format": "ply"}, data=_session_form(base, scans), timeout=60
     )
@@ -169,9 +189,6 @@ def test_a_session_of_two_scans_shows_the_union_its_region_and_what_is_missing(b
     assert note.get_attribute("data-round-trip") == rebuilt.headers["x-round-trip"]  # the service's verdict shown
     assert rebuilt.headers["x-round-trip"] in {"closed", "open", "unseen"}
     assert _drawn_share(browser.find_element(By.ID, "rebuilt")) > 0.03  # the rebuilt body is drawn
-
-    if os.environ.get("SESSION_SCREENSHOT"):
-        browser.save_screenshot(os.environ["SESSION_SCREENSHOT"])
 
 
 def _drawn(canvas) -> np.ndarray:

@@ -31,11 +31,6 @@ def removed(kept: tuple[str, ...]) -> tuple[str, ...]:
 
 
 @pytest.fixture(scope="module")
-def template() -> Template:
-    return Template.load(Settings().models_dir)
-
-
-@pytest.fixture(scope="module")
 def scans(template) -> dict[str, bytes]:
     """Three views of the template body in its own frame, each the body without some parts."""
     found = {name: template_part(template, removed(kept)) for name, kept in SESSION_SCANS.items()}

@@ -20,11 +20,6 @@ LEGS = ("left_thigh", "right_thigh", "left_shin", "right_shin", "left_foot", "ri
 HEAD_AND_ARMS = ("head", "neck", "left_upper_arm", "right_upper_arm", "left_hand", "right_hand")
 
 
-@pytest.fixture(scope="module")
-def template() -> Template:
-    return Template.load(Settings().models_dir)
-
-
 def region(template: Template, removed: tuple[str, ...]) -> Mesh:
     """The template with some body parts cut away."""
     keep = ~np.isin(template.labels, [PART_NAMES.index(p) for p in removed])

@@ -15,7 +15,7 @@ from app.inference.models import InvalidOverlap, checked_boundaries, checked_ove
 from app.inference.template import PART_NAMES
 from app.samples import PARTS as SAMPLE_PARTS
 from app.samples import sample_overlap, template_part
-from tests.api.test_union_api import LEGS, PROBLEM, ply_bytes, region, spectrum, template  # noqa: F401 (fixture)
+from tests.api.test_union_api import LEGS, PROBLEM, ply_bytes, region, spectrum
 
 LEFT_ARM = ("left_upper_arm", "left_forearm", "left_hand")
 
