@@ -78,38 +78,41 @@ def fit_bands(fit: list[Read], test: list[Read]) -> dict[str, list[dict]]:
         tested = [r for r in test if band_of(r.views) == band]
         if not rows:
             raise ValueError(f"no calibration session of up to {up_to} views: scan more people")
-        fused = _sigma([r.fused for r in rows], [r.truth for r in rows])
-        methods["fused"].append(
-            {
-                "views_up_to": up_to,
-                "relative_sigma": np.round(fused, 6).tolist(),
-                "sessions": len(rows),
-                "held_out_sessions": len(tested),
-                "held_out_coverage": _held([r.fused for r in tested], [r.truth for r in tested], fused),
-            }
-        )
-        aligned_rows = [r for r in rows if r.aligned is not None] or rows
-        aligned = _sigma(
-            [r.aligned if r.aligned is not None else r.fused for r in aligned_rows], [r.truth for r in aligned_rows]
-        )
-        closer = np.mean([_unregistered_error(r) for r in rows]) < np.mean(
-            [relative_error(r.chain, r.truth) for r in rows]
-        )
-        tested_aligned = [r for r in tested if r.aligned is not None]
-        methods["aligned"].append(
-            {
-                "views_up_to": up_to,
-                "relative_sigma": np.round(aligned, 6).tolist(),
-                "unregistered_by": "aligned" if closer else "learned-chain",
-                "sessions": len(rows),
-                "aligned_sessions": sum(r.aligned is not None for r in rows),
-                "held_out_sessions": len(tested),
-                "held_out_coverage": _held(
-                    [r.aligned for r in tested_aligned], [r.truth for r in tested_aligned], aligned
-                ),
-            }
-        )
+        methods["fused"].append(_fused_band(up_to, rows, tested))
+        methods["aligned"].append(_aligned_band(up_to, rows, tested))
     return methods
+
+
+def _fused_band(up_to: int, rows: list[Read], tested: list[Read]) -> dict:
+    """One band's σ of fused unions, fitted on ``rows``, held on ``tested``."""
+    fused = _sigma([r.fused for r in rows], [r.truth for r in rows])
+    return {
+        "views_up_to": up_to,
+        "relative_sigma": np.round(fused, 6).tolist(),
+        "sessions": len(rows),
+        "held_out_sessions": len(tested),
+        "held_out_coverage": _held([r.fused for r in tested], [r.truth for r in tested], fused),
+    }
+
+
+def _aligned_band(up_to: int, rows: list[Read], tested: list[Read]) -> dict:
+    """One band's σ of aligned unions (over the sessions that aligned, the fused where none
+    did), and whether its unregistered sessions are read aligned or through the chain."""
+    aligned_rows = [r for r in rows if r.aligned is not None] or rows
+    aligned = _sigma(
+        [r.aligned if r.aligned is not None else r.fused for r in aligned_rows], [r.truth for r in aligned_rows]
+    )
+    closer = np.mean([_unregistered_error(r) for r in rows]) < np.mean([relative_error(r.chain, r.truth) for r in rows])
+    tested_aligned = [r for r in tested if r.aligned is not None]
+    return {
+        "views_up_to": up_to,
+        "relative_sigma": np.round(aligned, 6).tolist(),
+        "unregistered_by": "aligned" if closer else "learned-chain",
+        "sessions": len(rows),
+        "aligned_sessions": sum(r.aligned is not None for r in rows),
+        "held_out_sessions": len(tested),
+        "held_out_coverage": _held([r.aligned for r in tested_aligned], [r.truth for r in tested_aligned], aligned),
+    }
 
 
 def calibrate_sessions(models: Path, count: int, held_out: int, seed: int, test_c: int, command: str) -> dict:
