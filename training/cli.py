@@ -215,7 +215,7 @@ def calibrate_sessions_command(
 @cli.command("fit-bodies")
 def fit_bodies_command(
     models: ModelsOption = Path("models"),
-    people: Annotated[int, typer.Option(help="Calibration people (scanned as a front-end does).")] = 6,
+    people: Annotated[int, typer.Option(help="Calibration people: men, women and children.")] = 9,
     seed: Annotated[int, typer.Option(help="Calibration people's seed.")] = 1,
     test_c: Annotated[int, typer.Option(help="Test C's people the bodies are scored on (at most 9).")] = 6,
 ) -> None:

@@ -53,9 +53,10 @@ class BodyBasis:
     posterior's vertex σ and on the spread of measurements over posterior bodies (short sessions
     err more than their posterior says, long ones less), the distance scales τ of an
     identity's confidence, ranked by spectrum and by shape (:mod:`app.sessions.identity`), the
-    shape distance past which a person scanned is taken for one not stored, and how far (σ per
+    shape distance past which a person scanned is taken for one not stored, how far (σ per
     whitened coefficient) a whole body fitted in a pose of its own lies from its shape at rest (a
-    stored scan's body, :mod:`app.api.routes.shapes`)."""
+    stored scan's body, :mod:`app.api.routes.shapes`), and the median gap a fit to a calibration
+    session leaves between its points and the body (:meth:`misfit`)."""
 
     mean: np.ndarray
     components: np.ndarray
@@ -67,6 +68,7 @@ class BodyBasis:
     shape_identity_scale: float = 1.0
     posed_spread: float = 1.0
     unknown_distance: float = float("inf")
+    fit_residual_m: float = float("inf")
 
     @classmethod
     def load(cls, path: Path) -> "BodyBasis":
@@ -83,6 +85,7 @@ class BodyBasis:
             float(data["shape_identity_scale"]),
             float(data["posed_spread"]),
             float(data["unknown_distance"]),
+            float(data["fit_residual_m"]),
         )
 
     def save(self, path: Path) -> None:
@@ -98,12 +101,28 @@ class BodyBasis:
             shape_identity_scale=self.shape_identity_scale,
             posed_spread=self.posed_spread,
             unknown_distance=self.unknown_distance,
+            fit_residual_m=self.fit_residual_m,
         )
 
     def scales(self, views: int) -> tuple[float, float]:
         """The factors on the vertex σ and on the measurements' spread for a fit to ``views`` views."""
         band = min(int(np.searchsorted(self.bands, views)), len(self.bands) - 1)
         return self.sigma_scale[band], self.spread_scale[band]
+
+    def misfit(self, residual_m: float) -> float:
+        """How much wider than calibrated a fit's vertex σ and measurement intervals are, where it
+        left its points ``residual_m`` from the body (at the median): 1 up to the calibration
+        fits' median gap, in proportion beyond. Where places put a limb on another (a child's
+        shins on its forearms) the fit holds centimetres off there, and its body errs about as
+        much more as its gap says (the residual rescaling of least squares). The identity reads
+        the posterior as fitted: its ranking is calibrated on its own."""
+        return max(1.0, residual_m / self.fit_residual_m)
+
+    def unknown_for(self, residual_m: float) -> float:
+        """The shape distance past which a fit that left its points ``residual_m`` from the body
+        takes the person scanned for one not stored: a fit that holds worse is farther from
+        everyone, the person scanned too."""
+        return self.unknown_distance * self.misfit(residual_m)
 
     def rest(self, coefficients: np.ndarray) -> np.ndarray:
         """(V, 3) or (n, V, 3): the rest-pose body of whitened ``coefficients`` (C,) or (n, C)."""

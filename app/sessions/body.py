@@ -6,7 +6,8 @@ person moved between them), each in a pose and frame of its own, one shape for a
 the views' points, drawn by area so that the fine mesh of a face or a hand does not outweigh the
 back, is fitted (:func:`app.inference.bodyfit.fit_body`); the measurements are taken on the fitted body,
 each with an interval from bodies drawn from the fit's posterior (scaled as the calibration on
-anny sessions found), and only where the session saw the parts a measurement rests on.
+anny sessions found, and widened where the fit holds worse than the calibration fits), and only
+where the session saw the parts a measurement rests on.
 """
 
 from dataclasses import dataclass
@@ -117,8 +118,9 @@ def fitted_session(basis: BodyBasis, template: np.ndarray, views: list[SessionVi
 
 def calibrated_sigma(basis: BodyBasis, fitted: FittedBody, views: int) -> np.ndarray:
     """(V,) each vertex's σ (m) of a body fitted to ``views`` views, scaled as the calibration
-    found for that many."""
-    return fitted.vertex_sigma(basis) * basis.scales(views)[0]
+    found for that many, and widened where the fit holds worse than the calibration fits
+    (:meth:`BodyBasis.misfit`)."""
+    return fitted.vertex_sigma(basis) * basis.scales(views)[0] * basis.misfit(fitted.residual_m)
 
 
 def session_body(
@@ -130,7 +132,7 @@ def session_body(
 ) -> SessionBody:
     """The session's body and measurements; ``coverage``: each body part's covered share."""
     fitted = fitted_session(basis, measurer.template.vertices, views, registered)
-    spread_scale = basis.scales(len(views))[1]
+    spread_scale = basis.scales(len(views))[1] * basis.misfit(fitted.residual_m)
     vertices = fitted.vertices(basis)
     values = measurer.measure(vertices)
     drawn = [measurer.measure(body) for body in fitted.samples(basis, SAMPLES, np.random.default_rng(SEED))]

@@ -1,6 +1,7 @@
 """The body fit against bodies whose shape and pose are known: drawn from the served basis, posed
 by its own skinning, seen whole or in part."""
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,8 @@ from scipy.spatial.transform import Rotation
 from app.contract import BODY_FILE
 from app.inference.bodyfit import BodyBasis, NotEnoughSeen, fit_body
 from app.inference.template import PART_NAMES, Template
+from app.sessions.body import calibrated_sigma, fitted_views
+from app.sessions.fused import View
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 
@@ -92,3 +95,21 @@ def test_one_body_seen_in_two_poses_comes_back_once(basis, template):
     assert error < 0.005
     as_one = fit_body(basis, points, places, template.vertices)  # read as one pose, the two halves disagree
     assert np.linalg.norm(as_one.vertices(basis) - truth, axis=1).mean() > 2 * error
+
+
+def test_a_fit_is_less_certain_in_proportion_as_it_holds_worse_than_the_calibration_fits(basis, template):
+    """A session's body keeps its calibrated σ where the fit leaves its points no farther from
+    the body than the calibration fits' median gap, and widens it by the ratio beyond; so does
+    the shape distance past which the person scanned is taken for one not stored."""
+    rng = np.random.default_rng(3)
+    body = posed(basis, basis.rest(rng.normal(scale=0.8, size=len(basis.components))), rng)
+    seen = rng.choice(len(body), 3000, replace=False)
+    view = View(body[seen], np.ones(len(seen)), np.zeros(len(seen), bool), np.empty((0, 2), np.int64))
+    plain = fit_body(basis, body[seen], template.vertices[seen], template.vertices)
+    for reference, widened in ((plain.residual_m * 2, 1.0), (plain.residual_m / 3, 3.0)):
+        calibrated = replace(basis, fit_residual_m=reference)
+        assert calibrated.misfit(plain.residual_m) == pytest.approx(widened)
+        fitted = fitted_views(calibrated, template.vertices, [view], [template.vertices[seen]], registered=True)
+        expected = plain.vertex_sigma(basis) * basis.scales(1)[0] * widened
+        np.testing.assert_allclose(calibrated_sigma(calibrated, fitted, 1), expected, rtol=1e-9)
+        assert calibrated.unknown_for(fitted.residual_m) == pytest.approx(basis.unknown_distance * widened)

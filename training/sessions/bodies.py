@@ -23,7 +23,7 @@ from app.inference.bodyfit import BodyBasis
 from app.inference.manifest import write_manifest
 from app.inference.measurements import MEASUREMENTS, Measurer
 from app.inference.models import SpectralModels
-from app.sessions.body import NoBodyFits, SessionBody, session_body, stored_body
+from app.sessions.body import NoBodyFits, SessionBody, fitted_session, session_body, stored_body
 from app.sessions.fused import fused_spectrum
 from app.sessions.identity import Candidate, ranked_rows, unknown_warning
 from app.sessions.session import SessionView, session_coverage, session_union
@@ -40,7 +40,7 @@ from training.sessions.identities import (
     write_seed_bodies,
 )
 from training.sessions.reading import moved, session_views
-from training.sessions.scans import VARIANTS, Person, people, solved_view, test_c_people
+from training.sessions.scans import EVERYONE, VARIANTS, Person, people, solved_view, test_c_people
 
 LENGTHS = (3, 5, 12, 24)
 ANSWERED = 5  # people an identity answers (its top)
@@ -87,11 +87,40 @@ def _scores(body: SessionBody, person: Person, measurer: Measurer, basis: BodyBa
         "vertex_ratio": (error / np.maximum(body.sigma, 1e-9)).tolist(),
         "measured": measured,
         "not_measured": list(body.not_measured),
+        "residual_m": body.fitted.residual_m,
     }
 
 
+def _scanned(served: SpectralModels, found: list[Person]) -> dict[tuple[int, str], list[SessionView]]:
+    """Each person's session, as cut and re-meshed, solved and placed once (keyed by the person's
+    number and the variant): the calibration reads it twice."""
+    faces = served.template.faces
+    return {
+        (number, variant): session_views(served, person, faces, variant)
+        for number, person in enumerate(found)
+        for variant in VARIANTS
+    }
+
+
+def _fit_residual(basis: BodyBasis, template: np.ndarray, scanned: dict[tuple[int, str], list[SessionView]]) -> float:
+    """The median gap (m) that the registered fits to ``scanned``'s session prefixes leave
+    between their points and the body: what a fit that holds leaves (:meth:`BodyBasis.misfit`)."""
+    gaps = []
+    for views in scanned.values():
+        for length in (length for length in LENGTHS if length <= len(views)):
+            try:
+                gaps.append(fitted_session(basis, template, views[:length], registered=True).residual_m)
+            except NoBodyFits:
+                continue
+    return float(np.median(gaps))
+
+
 def _sessions(
-    served: SpectralModels, basis: BodyBasis, found: list[Person], variants: tuple[str, ...], gallery: Gallery
+    served: SpectralModels,
+    basis: BodyBasis,
+    found: list[Person],
+    scanned: dict[tuple[int, str], list[SessionView]],
+    gallery: Gallery,
 ) -> list[dict]:
     """Every person's session prefixes fitted (registered at each length, in their own frames at
     UNREGISTERED_LENGTH), scored, and ranked against ``gallery``; a session whose views did not
@@ -99,38 +128,37 @@ def _sessions(
     faces = served.template.faces
     measurer = served.measurer  # the served models hold the basis being calibrated, so their measurer too
     rows = []
-    for number, person in enumerate(found):
+    for (number, variant), views in scanned.items():
+        person = found[number]
         ceiling = gallery.person_distances(closed_spectrum(person.rest, faces, served.k))
-        for variant in variants:
-            views = session_views(served, person, faces, variant)
-            for length in LENGTHS:
-                if length > len(views):
-                    continue
-                prefix = views[:length]
-                row = {"views": length, "variant": variant, "registered": True}
-                try:
-                    body = _fitted(served, basis, prefix, registered=True)
-                except NoBodyFits:  # answered 409 body-not-fitted: counted, not scored
-                    rows.append(row | {"fitted": False})
-                    continue
-                today = {"today": gallery.person_distances(_decoded_union(served, prefix)), "ceiling": ceiling}
-                scores = _scores(body, person, measurer, basis) | _ranked(body, person, served, gallery)
-                rows.append(row | {"fitted": True} | scores | today)
-            prefix = views[:UNREGISTERED_LENGTH]
-            frames = moved(prefix, np.random.default_rng([FRAMES_STREAM, number]))
-            sent = [replace(view, geometry=frame) for view, frame in zip(prefix, frames, strict=True)]
-            row = {"views": len(sent), "variant": variant, "registered": False}
+        for length in LENGTHS:
+            if length > len(views):
+                continue
+            prefix = views[:length]
+            row = {"views": length, "variant": variant, "registered": True}
             try:
-                body = _fitted(served, basis, sent, registered=False)
+                body = _fitted(served, basis, prefix, registered=True)
             except NoBodyFits:  # answered 409 body-not-fitted: counted, not scored
                 rows.append(row | {"fitted": False})
                 continue
-            rows.append(
-                row
-                | {"fitted": True, "ceiling": ceiling}
-                | _scores(body, person, measurer, basis)
-                | _ranked(body, person, served, gallery)
-            )
+            today = {"today": gallery.person_distances(_decoded_union(served, prefix)), "ceiling": ceiling}
+            scores = _scores(body, person, measurer, basis) | _ranked(body, person, served, gallery)
+            rows.append(row | {"fitted": True} | scores | today)
+        prefix = views[:UNREGISTERED_LENGTH]
+        frames = moved(prefix, np.random.default_rng([FRAMES_STREAM, number]))
+        sent = [replace(view, geometry=frame) for view, frame in zip(prefix, frames, strict=True)]
+        row = {"views": len(sent), "variant": variant, "registered": False}
+        try:
+            body = _fitted(served, basis, sent, registered=False)
+        except NoBodyFits:  # answered 409 body-not-fitted: counted, not scored
+            rows.append(row | {"fitted": False})
+            continue
+        rows.append(
+            row
+            | {"fitted": True, "ceiling": ceiling}
+            | _scores(body, person, measurer, basis)
+            | _ranked(body, person, served, gallery)
+        )
     return rows
 
 
@@ -171,28 +199,37 @@ def _scales(rows: list[dict]) -> tuple[float, float]:
     return float(np.quantile(vertex, 0.9) / INTERVAL_Z), float(np.quantile(spread, 0.9) / INTERVAL_Z)
 
 
-def _identity(rows: list[dict], shape_scale: float, unknown: float) -> dict:
+def _identity(rows: list[dict], basis: BodyBasis) -> dict:
     """How often the person scanned is answered first and among the first ANSWERED by shape, the
     first's mean confidence as served, how often the answer says the person is probably not
     stored when they are, and when they are not (their own shapes taken out of the gallery); the
     same first-place rate for the fitted body's closed spectrum and the union decoded (the
     service's rankings before; decoded: registered sessions) and for the true body's spectrum at
-    rest (a spectrum's ceiling)."""
-    answers = [_by_shape(row["shape"], shape_scale, unknown) for row in rows]
+    rest (a spectrum's ceiling); ``basis``: its identity scale and how far a fit that holds as
+    each row's did takes the person for one not stored."""
+    unknown = [basis.unknown_for(row["residual_m"]) for row in rows]
+    scale = basis.shape_identity_scale
+    answers = [_by_shape(row["shape"], scale, far) for row, far in zip(rows, unknown, strict=True)]
     strangers = [
-        _by_shape({k: d for k, d in row["shape"].items() if k != row["label"]}, shape_scale, unknown) for row in rows
+        _by_shape({k: d for k, d in row["shape"].items() if k != row["label"]}, scale, far)
+        for row, far in zip(rows, unknown, strict=True)
     ]
     today = [rank_of(row["today"], row["label"]) == 0 for row in rows if "today" in row]
     return {
         "top1": float(np.mean([a[0].label == row["label"] for a, row in zip(answers, rows, strict=True)])),
         "top5": float(np.mean([row["label"] in {c.label for c in a} for a, row in zip(answers, rows, strict=True)])),
         "confidence": float(np.mean([a[0].confidence for a in answers])),
-        "stored_warned": float(np.mean([bool(unknown_warning(a[0], unknown)) for a in answers])),
-        "not_stored_warned": float(np.mean([bool(unknown_warning(a[0], unknown)) for a in strangers])),
+        "stored_warned": _warned(answers, unknown),
+        "not_stored_warned": _warned(strangers, unknown),
         "spectrum_top1": float(np.mean([rank_of(row["distances"], row["label"]) == 0 for row in rows])),
         "today_top1": float(np.mean(today)) if today else None,
         "ceiling_top1": float(np.mean([rank_of(row["ceiling"], row["label"]) == 0 for row in rows])),
     }
+
+
+def _warned(answers: list[list[Candidate]], unknown: list[float]) -> float:
+    """How often the answers say the person scanned is probably not stored."""
+    return float(np.mean([bool(unknown_warning(a[0], far)) for a, far in zip(answers, unknown, strict=True)]))
 
 
 def _by_shape(person_distances: dict[str, float], scale: float, unknown: float) -> list[Candidate]:
@@ -200,10 +237,10 @@ def _by_shape(person_distances: dict[str, float], scale: float, unknown: float) 
     return ranked_rows([(label, label, d) for label, d in person_distances.items()], ANSWERED, scale, unknown)
 
 
-def summary(rows: list[dict], shape_scale: float, unknown: float) -> dict:
+def summary(rows: list[dict], basis: BodyBasis) -> dict:
     """Per reading (views / registered): vertex error, the mean body's, interval coverage, per
     measurement the mean absolute error (mm), the mean body's, coverage and how often measured,
-    and identity (:func:`_identity`, confidences at ``shape_scale``)."""
+    and identity (:func:`_identity`, as ``basis`` ranks and warns)."""
     out = {}
     for key in sorted({(row["views"], row["registered"]) for row in rows}):
         tried = [row for row in rows if (row["views"], row["registered"]) == key]
@@ -211,15 +248,8 @@ def summary(rows: list[dict], shape_scale: float, unknown: float) -> dict:
         if not chosen:
             continue
         ratios = np.concatenate([row["vertex_ratio"] for row in chosen])
-        per = {}
-        for name in MEASUREMENTS:
-            taken = [row["measured"][name] for row in chosen if name in row["measured"]]
-            per[name] = {
-                "measured": len(taken),
-                "mae_mm": float(1e3 * np.mean([abs(t["error"]) for t in taken])) if taken else None,
-                "mean_body_mae_mm": float(1e3 * np.mean([abs(t["mean_body_error"]) for t in taken])) if taken else None,
-                "held": float(np.mean([abs(t["error"]) <= t["half"] for t in taken])) if taken else None,
-            }
+        taken = {name: [row["measured"][name] for row in chosen if name in row["measured"]] for name in MEASUREMENTS}
+        per = {name: _measurement(taken[name]) for name in MEASUREMENTS}
         out[f"{key[0]}/{'registered' if key[1] else 'unregistered'}"] = {
             "sessions": len(tried),
             "fitted": len(chosen),
@@ -228,9 +258,22 @@ def summary(rows: list[dict], shape_scale: float, unknown: float) -> dict:
             "mean_body_mm": float(np.mean([row["mean_body_mm"] for row in chosen])),
             "vertex_held": float(np.mean(ratios <= INTERVAL_Z)),
             "measurements": per,
-            "identity": _identity(chosen, shape_scale, unknown),
+            "identity": _identity(chosen, basis),
         }
     return out
+
+
+def _measurement(taken: list[dict]) -> dict:
+    """One measurement over the fits that gave it: how many, its mean absolute error and the mean
+    body's (mm), and how often its interval held; None where no fit gave it."""
+    if not taken:
+        return {"measured": 0, "mae_mm": None, "mean_body_mae_mm": None, "held": None}
+    return {
+        "measured": len(taken),
+        "mae_mm": float(1e3 * np.mean([abs(t["error"]) for t in taken])),
+        "mean_body_mae_mm": float(1e3 * np.mean([abs(t["mean_body_error"]) for t in taken])),
+        "held": float(np.mean([abs(t["error"]) <= t["half"] for t in taken])),
+    }
 
 
 def fit_bodies(models: Path, count: int, seed: int, test_c: int, command: str) -> dict:
@@ -244,11 +287,13 @@ def fit_bodies(models: Path, count: int, seed: int, test_c: int, command: str) -
     write_manifest(models)
     served = SpectralModels(models)
     faces, seed_gallery = served.template.faces, Gallery.seed(models)
-    _, calibration_people = people(count, seed)
+    _, calibration_people = people(count, seed, EVERYONE)  # children too: a third of the people scanned are
     stored = np.array([closed_spectrum(person.rest, faces, served.k) for person in calibration_people])
     at_rest = np.array([rest_coefficients(basis, person.rest) for person in calibration_people])
     gallery = seed_gallery.with_people([person.label for person in calibration_people], stored, at_rest)
-    rows = [row for row in _sessions(served, basis, calibration_people, VARIANTS, gallery) if row["fitted"]]
+    scanned = _scanned(served, calibration_people)
+    basis = replace(basis, fit_residual_m=_fit_residual(basis, served.template.vertices, scanned))
+    rows = [row for row in _sessions(served, basis, calibration_people, scanned, gallery) if row["fitted"]]
     lower = (0, *BANDS[:-1])
     scales = [
         _scales([row for row in rows if low < row["views"] <= high]) for low, high in zip(lower, BANDS, strict=True)
@@ -256,7 +301,8 @@ def fit_bodies(models: Path, count: int, seed: int, test_c: int, command: str) -
     sigma_scale, spread_scale = tuple(s[0] for s in scales), tuple(s[1] for s in scales)
     identity_scale = fitted_scale([(row["distances"], row["label"]) for row in rows])
     shape_scale = fitted_scale([(row["shape"], row["label"]) for row in rows])
-    unknown = max(row["shape"][row["label"]] for row in rows)  # no calibration person's own shape was farther
+    # no calibration person's own shape was farther, for a fit that held as well as theirs
+    unknown = max(row["shape"][row["label"]] / basis.misfit(row["residual_m"]) for row in rows)
     posed_spread = _posed_spread(served, basis, calibration_people)
     basis = replace(
         basis,
@@ -272,6 +318,7 @@ def fit_bodies(models: Path, count: int, seed: int, test_c: int, command: str) -
     write_manifest(models)
     served = SpectralModels(models)
     _, found = test_c_people(test_c)
+    evaluated = _sessions(served, served.body, found, _scanned(served, found), seed_gallery)
     content = {
         "people": count,
         "seed": seed,
@@ -283,8 +330,9 @@ def fit_bodies(models: Path, count: int, seed: int, test_c: int, command: str) -
         "shape_identity_scale": shape_scale,
         "posed_spread": posed_spread,
         "unknown_distance": unknown,
-        "calibration": summary([row | {"fitted": True} for row in rows], shape_scale, unknown),
-        "evaluation": summary(_sessions(served, served.body, found, VARIANTS, seed_gallery), shape_scale, unknown),
+        "calibration": summary([row | {"fitted": True} for row in rows], basis),
+        "fit_residual_m": basis.fit_residual_m,
+        "evaluation": summary(evaluated, served.body),
         "command": command,
     }
     (models / BODIES_METRICS).write_text(json.dumps(content, indent=1) + "\n")

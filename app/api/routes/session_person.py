@@ -124,9 +124,10 @@ async def session_identity_route(
     bodies = await anyio.to_thread.run_sync(store.bodies)
     common = {"id": session_id, "model_version": models.version, "views": len(state.views)}
     if bodies.ids:
-        ranked = ranked_by_shape(fitted, bodies, top, basis.shape_identity_scale, basis.unknown_distance)
+        unknown = basis.unknown_for(fitted.residual_m)
+        ranked = ranked_by_shape(fitted, bodies, top, basis.shape_identity_scale, unknown)
         people, warnings = answered(ranked, calibrated=True)
-        warnings += unknown_warning(ranked[0] if ranked else None, basis.unknown_distance)
+        warnings += unknown_warning(ranked[0] if ranked else None, unknown)
         unranked = await anyio.to_thread.run_sync(store.count) - len(bodies.ids)
         if unranked:
             warnings.append(f"{unranked} stored shapes have no body (none fitted their scan) and are not ranked")
