@@ -27,7 +27,7 @@ from app.sessions.session import SessionView
 
 FIT_POINTS = 4000  # the points a fit reads, which set its cost
 MAX_POSES = 8  # views fitted each in a pose of its own, at most: each adds 96 unknowns to the fit
-MAX_RESIDUAL_M = 0.05  # a fit whose points stay further at the median is no body (sessions: 2–26 mm, a 10 cm ball 96)
+MAX_RESIDUAL_M = 0.05  # a fit whose points stay further at the median is no body (a ball's stay far beyond)
 SAMPLES = 16  # posterior bodies an interval is read from
 SEEN = 0.3  # a body part whose covered share is below this was not seen enough to measure on
 SEED = 0  # the draws are fixed: one session, one answer
