@@ -128,6 +128,16 @@ class _Pair:
         pick = np.minimum if nearer else np.maximum
         return self.distance <= scale * pick(self.reach, self.other_reach)
 
+    def inside(self, other: View) -> np.ndarray:
+        """Which points lie on the ``other`` view's inside: near one of its points that is not
+        on its boundary."""
+        return self.near() & ~other.boundary[self.nearest]
+
+    def repeated(self) -> np.ndarray:
+        """Which points are one of the other view's points again (within DUPLICATE of the finer
+        spacing)."""
+        return self.near(DUPLICATE, nearer=True)
+
 
 def fused_cloud(views: list[View]) -> FusedCloud:
     """The union of ``views`` (one frame): each surface point once (the larger view's where two
@@ -179,9 +189,9 @@ def _overlapped(
     under = [np.zeros(len(view.points), bool) for view in views]
     loose = [view.boundary.copy() for view in views]
     for (i, j), pair in pairs.items():
-        inside = pair.near() & ~views[j].boundary[pair.nearest]
+        inside = pair.inside(views[j])
         if j < i:  # a larger view's inside, or one of its points, is already there
-            kept[i] &= ~(inside | pair.near(DUPLICATE, nearer=True))
+            kept[i] &= ~(inside | pair.repeated())
             under[i] |= inside
         loose[i] &= ~inside
     return kept, under, loose
@@ -198,7 +208,7 @@ def covered_views(views: list[View], pairs: dict[tuple[int, int], _Pair]) -> set
             if j == i or j in gone:
                 continue
             pair = pairs[i, j]
-            on = (pair.near() & ~views[j].boundary[pair.nearest]) | pair.near(DUPLICATE, nearer=True)
+            on = pair.inside(views[j]) | pair.repeated()
             if float(views[i].mass[~on].sum()) <= COVERED_SHARE * float(views[i].mass.sum()):
                 gone.add(i)
                 break
@@ -265,9 +275,10 @@ def _bridge(
             continue
         meets = loose[i] & pair.near(BRIDGE) & loose[j][pair.nearest]
         facing = np.einsum("ij,ij->i", inward[i][meets], inward[j][pair.nearest[meets]]) < 0
-        joined[i][np.flatnonzero(meets)[facing]] = True
+        seam = np.flatnonzero(meets)[facing]
+        joined[i][seam] = True
         if j < i:
-            earlier[i][np.flatnonzero(meets)[facing]] = True
+            earlier[i][seam] = True
     for edge, join in zip(loose, joined, strict=True):
         edge &= ~join
     return earlier
