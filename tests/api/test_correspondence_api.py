@@ -319,7 +319,7 @@ def test_a_part_in_the_wrong_units_is_not_placed_but_its_spectrum_is_answered(cl
     """A body part in metres sent as millimetres (a millionth of its area) is refused by the
     placing routes, naming the unit that fits; its spectrum alone is still answered, warned."""
     name, data = next(iter(samples.items()))
-    placed = client.post("/v1/correspondence", params={"units": "mm"}, files={"file": (name, data)})
+    placed = correspond(client, name, data, units="mm")
     assert placed.status_code == 422 and placed.json()["type"] == "/problems/implausible-size"
     assert "(units=m)" in placed.json()["detail"]
     files = [("files", (n, d)) for n, d in samples.items()]

@@ -109,7 +109,7 @@ def test_distinct_vertices_sharing_a_weighted_sum_are_not_merged():
 
 
 @pytest.mark.parametrize("seed", range(3))
-def testdistinct_faces_keep_the_first_of_each_triangle_in_any_vertex_order(seed):
+def test_distinct_faces_keep_the_first_of_each_triangle_in_any_vertex_order(seed):
     rng = np.random.default_rng(seed)
     faces = _random_faces(rng, 8, 60)  # few vertices: many repeats, in every rotation and orientation
     kept = distinct_faces(faces)
