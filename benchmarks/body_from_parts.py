@@ -11,7 +11,9 @@ uploads. Fitted: the body fitted to the two views' points through their places
 and frame of its own). Decoded: their union's spectrum (the learned operator told the overlap
 their places say) decoded by the shape decoder, as the routes answered before. Mean vertex error
 against the person at rest (mm, after a rigid alignment), and whether the person comes first
-among the seed database's 63 by the body's closed spectrum.
+among the seed database's 63: by the body's closed spectrum (as ``/v1/retrieve`` ranked uploads
+before), and, the fitted body, by shape (as it ranks them now, with the first answer's mean
+confidence).
 
 Needs the ``train`` extra (anny) and the served models in ``models/``.
 """
@@ -24,6 +26,7 @@ import numpy as np
 from app.inference.models import SpectralModels
 from app.sessions.body import NoBodyFits, fitted_views
 from app.sessions.chain import Located, folded_union
+from app.sessions.identity import ranked_by_shape
 from app.sessions.session import session_view
 from training.reconstruction.evaluate import closed_spectrum, rigidly_aligned
 from training.sessions.identities import Gallery, rank_of
@@ -45,18 +48,20 @@ def read(models: SpectralModels, gallery: Gallery, person: Person, pair: tuple[i
     placed = [models.correspondence.placed(view.part) for view in solved]
     kept = [session_view("", view, place, []) for view, place in zip(solved, placed, strict=True)]
     frames = moved(kept, np.random.default_rng(seed))
-    found = {}
+    values = [np.asarray(view.report.eigenvalues) for view in solved]
+    union = folded_union(models, values, [Located.placed(p) for p in placed], None, None, None).result
+    decoded = models.reconstruct(union.eigenvalues, union.sigma)
+    found = {"decoded": scored(models, gallery, person, decoded)}
     try:
         fitted = fitted_views(
             models.body, models.template.vertices, frames, [p.placement.position for p in placed], False
-        ).vertices(models.body)
-        found["fitted"] = fitted
+        )
     except NoBodyFits:
-        found["fitted"] = None
-    values = [np.asarray(view.report.eigenvalues) for view in solved]
-    union = folded_union(models, values, [Located.placed(p) for p in placed], None, None, None).result
-    found["decoded"] = models.reconstruct(union.eigenvalues, union.sigma)
-    return {name: None if body is None else scored(models, gallery, person, body) for name, body in found.items()}
+        return found | {"fitted": None}
+    unknown = models.body.unknown_for(fitted.residual_m)
+    first = ranked_by_shape(fitted, gallery.bodies(), 1, models.body.shape_identity_scale, unknown)[0]
+    by_shape = (first.label == person.label, first.confidence)
+    return found | {"fitted": (*scored(models, gallery, person, fitted.vertices(models.body)), *by_shape)}
 
 
 def scored(models: SpectralModels, gallery: Gallery, person: Person, body: np.ndarray) -> tuple[float, bool]:
@@ -73,18 +78,17 @@ def main() -> None:
     models = SpectralModels(MODELS)
     gallery = Gallery.seed(MODELS)
     _, found = test_c_people(args.people)
-    print("| views | pairs | fitted: body mm / first | decoded: body mm / first |")
+    print("| views | pairs | fitted: body mm / first by spectrum, by shape, its confidence | decoded: mm / first |")
     print("|---|---|---|---|")
     for text in args.pairs:
         pair = tuple(int(i) for i in text.split(","))
         rows = [read(models, gallery, person, pair, number) for number, person in enumerate(found)]
         cells = []
         for name in ("fitted", "decoded"):
-            done = [row[name] for row in rows if row[name] is not None]
-            error = np.mean([d[0] for d in done]) if done else float("nan")
-            first = np.mean([d[1] for d in done]) if done else float("nan")
+            done = np.array([row[name] for row in rows if row[name] is not None], dtype=float)
+            shares = " / ".join(f"{100 * share:.0f} %" for share in done[:, 1:].mean(axis=0))  # the last: confidence
             fitted = f" ({len(done)} fitted)" if name == "fitted" else ""
-            cells.append(f"{error:.1f} / {100 * first:.0f} %{fitted}")
+            cells.append(f"{done[:, 0].mean():.1f} / {shares}{fitted}")
         print(f"| {pair[0]} and {pair[1]} | {len(rows)} | {cells[0]} | {cells[1]} |")
 
 

@@ -19,7 +19,7 @@ from app.api.solver import SolverPool
 from app.api.unions import UnionOutcome
 from app.geometry.pipeline import SpectrumOptions
 from app.inference.body import open_surface, spectrum_gap
-from app.inference.bodyfit import NotEnoughSeen
+from app.inference.bodyfit import FittedBody, NotEnoughSeen
 from app.inference.models import SpectralModels, UnionEstimate
 from app.sessions.body import NoBodyFits, calibrated_sigma, fitted_views
 from app.sessions.fused import view_of_part
@@ -88,30 +88,43 @@ async def rebuilt_body(request: Request, models: SpectralModels, union: UnionEst
     return RebuiltBody(vertices, mesh, eigenvalues, gap, round_trip(gap, union))
 
 
-async def scanned_body(request: Request, models: SpectralModels, outcome: UnionOutcome) -> RebuiltBody:
-    """The body of the person the operands were scanned from: fitted to the uploads' points where
-    every operand is an upload placed on the template and a body fits them (decision 039: 5 views
-    ~10 mm where their union's spectrum decodes to ~75); else decoded from the union (the models
-    must then have a decoder)."""
+@dataclass(frozen=True)
+class UploadsFit:
+    """The body fitted to the operands' points (``fitted``), or why none fits them where every
+    operand is an upload placed on the template (``not_fitted``); both None where one is not."""
+
+    fitted: FittedBody | None = None
+    not_fitted: str | None = None
+
+
+def fit_uploads(models: SpectralModels, outcome: UnionOutcome) -> UploadsFit:
+    """The body fitted to the uploads' points through their places, in frames and poses of their
+    own (decision 039: 5 views ~10 mm where their union's spectrum decodes to ~75), where every
+    operand is an upload placed on the template and the models have a body. Blocking: a few
+    seconds of one core at most (it reads at most ``FIT_POINTS`` points)."""
     parts = [operand.part for operand in outcome.operands]
     every_upload_placed = all(part is not None for part in parts) and len(outcome.placed) == len(parts)
     if models.body is None or not every_upload_placed:
-        return await rebuilt_body(request, models, outcome.result)
+        return UploadsFit()
     geometry = [view_of_part(part) for part in parts if part is not None]
     places = [placed.placement.position for placed in outcome.placed]
     try:
-        fitted = await anyio.to_thread.run_sync(
-            fitted_views, models.body, models.template.vertices, geometry, places, False
-        )
+        return UploadsFit(fitted_views(models.body, models.template.vertices, geometry, places, False))
     except (NotEnoughSeen, NoBodyFits) as exc:
-        if models.decoder_session is None:
-            raise
+        return UploadsFit(not_fitted=str(exc))
+
+
+async def scanned_body(request: Request, models: SpectralModels, outcome: UnionOutcome, fit: UploadsFit) -> RebuiltBody:
+    """The body of the person the operands were scanned from: ``fit``'s body where one was fitted
+    to the uploads, else decoded from the union (the models must then have a decoder; where a
+    fit was tried, the body says why it failed)."""
+    if fit.fitted is None:
         decoded = await rebuilt_body(request, models, outcome.result)
-        return replace(decoded, not_fitted=str(exc))
-    vertices = fitted.vertices(models.body)
+        return replace(decoded, not_fitted=fit.not_fitted)
+    vertices = fit.fitted.vertices(models.body)
     mesh, eigenvalues = await solved_body(request, models, vertices)
     gap = spectrum_gap(eigenvalues, outcome.result.eigenvalues)
-    sigma = calibrated_sigma(models.body, fitted, len(geometry))
+    sigma = calibrated_sigma(models.body, fit.fitted, len(outcome.operands))
     return RebuiltBody(vertices, mesh, eigenvalues, gap, "fitted", "fitted", sigma)
 
 

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from app.inference.bodyfit import FittedBody
-from app.retrieval.store import Match, StoredBodies
+from app.inference.bodyfit import BodyBasis, FittedBody
+from app.retrieval.store import Match, ShapeStore, StoredBodies
 
 SHAPES_PER_PERSON = 10  # stored shapes asked for per person answered: a person is stored in several poses
 CLEARLY_AHEAD = 0.5  # a first person less confident than this is no identification: the answer says so
@@ -65,6 +65,37 @@ def ranked_by_shape(
     someone not stored, at distance ``unknown``."""
     distance = shape_distances(fitted, bodies)
     return ranked_rows(list(zip(bodies.labels, bodies.ids, distance.tolist(), strict=True)), top, scale, unknown)
+
+
+@dataclass(frozen=True)
+class ShapeRanking:
+    """The stored shapes nearest a fitted body by shape, nearest first, as (id, label, distance);
+    the people among them, one candidate each with its confidence; the ranking's warnings."""
+
+    shapes: list[tuple[str, str, float]]
+    people: list[Candidate]
+    warnings: list[str]
+
+
+def shape_ranking(store: ShapeStore, basis: BodyBasis, fitted: FittedBody, top: int) -> ShapeRanking | None:
+    """The ``top`` stored shapes and people nearest ``fitted`` by shape (:func:`ranked_by_shape`,
+    someone not stored at the distance a fit as good as this one allows), warned where even the
+    nearest is farther than stored people's own scans lie and where stored shapes have no body to
+    rank; None where none has (they are then ranked by the fitted body's spectrum). Blocking: it
+    reads every stored body."""
+    bodies = store.bodies()
+    if not bodies.ids:
+        return None
+    unknown = basis.unknown_for(fitted.residual_m)
+    distance = shape_distances(fitted, bodies)
+    rows = list(zip(bodies.labels, bodies.ids, distance.tolist(), strict=True))
+    people = ranked_rows(rows, top, basis.shape_identity_scale, unknown)
+    shapes = [(bodies.ids[i], bodies.labels[i], float(distance[i])) for i in np.argsort(distance)[:top]]
+    warnings = unknown_warning(people[0] if people else None, unknown)
+    unranked = store.count() - len(bodies.ids)
+    if unranked:
+        warnings.append(f"{unranked} stored shapes have no body (none fitted their scan) and are not ranked")
+    return ShapeRanking(shapes, people, warnings)
 
 
 def unknown_warning(first: Candidate | None, unknown: float) -> list[str]:

@@ -13,7 +13,7 @@ import pytest
 import trimesh
 from fastapi.testclient import TestClient
 
-from app.contract import BOUNDARY_RATIO, RECONSTRUCTION_FILE
+from app.contract import BOUNDARY_RATIO, RECONSTRUCTION_FILE, SEED_BODIES_FILE
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.geometry.shapes import Mesh
 from app.geometry.topology import drop_unreferenced
@@ -154,8 +154,8 @@ def test_a_whole_body_scan_with_blind_spots_is_stored_once_its_holes_are_capped(
 
 def test_scans_cut_from_a_stored_body_find_it_through_the_body_fitted_to_them(client, stored, template):
     """Three uploaded scans cut from the stored template, together covering it: their union is an
-    open surface, ranked through the body fitted to their points, which finds the body they were
-    cut from first (ranked through the union decoded, such scans did not find it in the top 100)."""
+    open surface, ranked by the shape of the body fitted to their points, which finds the body they
+    were cut from first (ranked through the union decoded, such scans did not find it in the top 100)."""
     from app.samples import SESSION_SCANS, template_part
 
     kept = [*SESSION_SCANS.values(), ("torso", "hips", "left_thigh", "left_shin", "left_foot", "right_upper_arm")]
@@ -166,9 +166,29 @@ def test_scans_cut_from_a_stored_body_find_it_through_the_body_fitted_to_them(cl
     response = client.post("/v1/retrieve", params={"top": 5}, files=files)
     assert response.status_code == 200, response.text
     answer = response.json()
-    assert answer["ranked_by"] == "fitted_body"
+    assert answer["ranked_by"] == "shape" and answer["looked_up"] is None
     assert answer["matches"][0]["id"] == stored["id"] and answer["matches"][0]["label"] == LABEL
+    distances = [match["distance"] for match in answer["matches"]]
+    assert distances == sorted(distances) and len(distances) == 5
     people = answer["people"]  # one answer per person, each with a calibrated confidence
     assert people[0]["label"] == LABEL and people[0]["shape_id"] == stored["id"]
     assert len({p["label"] for p in people}) == len(people) == 5
     assert all(p["confidence"] is not None for p in people)
+
+
+def test_uploads_are_ranked_by_the_fitted_body_s_spectrum_where_no_stored_shape_has_a_body(tmp_path, template):
+    """Seeded without the seed people's bodies, no stored shape has one to rank by shape: an open
+    union of uploads is ranked by the fitted body's closed spectrum instead, and says so."""
+    from app.samples import SESSION_SCANS, template_part
+
+    files = [
+        ("files", (f"scan{i}.ply", template_part(template, tuple(p for p in PART_NAMES if p not in parts))))
+        for i, parts in enumerate(SESSION_SCANS.values())
+    ]
+    with TestClient(create_app(settings_without(tmp_path, SEED_BODIES_FILE))) as bare:
+        response = bare.post("/v1/retrieve", params={"top": 3}, files=files)
+    assert response.status_code == 200, response.text
+    found = response.json()
+    assert found["ranked_by"] == "fitted_body" and len(found["looked_up"]) == 20 and len(found["people"]) == 3
+    looked_up = np.array(found["looked_up"])
+    assert abs(looked_up[0]) <= BOUNDARY_RATIO * looked_up[1]  # the fitted body is closed

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from app.inference.bodyfit import FittedBody
-from app.retrieval.store import Match, ShapeRecord, StoredBodies
+from app.inference.bodyfit import BodyBasis, FittedBody
+from app.retrieval.store import Match, ShapeRecord, SQLiteStore, StoredBodies, StoredBody
 from app.sessions.identity import (
     CLEARLY_AHEAD,
     ahead_warning,
@@ -15,6 +15,7 @@ from app.sessions.identity import (
     ranked_people,
     ranked_rows,
     shape_distances,
+    shape_ranking,
     unknown_warning,
 )
 
@@ -69,3 +70,22 @@ def test_someone_not_stored_takes_a_share_of_the_confidence_and_is_named_when_ne
     far = ranked_rows([("ann", "a", 3.0)], top=1, scale=1.0, unknown=1.0)
     assert far[0].confidence == pytest.approx(math.exp(-4.5) / (math.exp(-4.5) + math.exp(-0.5)))
     assert "probably not stored" in unknown_warning(far[0], 1.0)[0] and not unknown_warning(people[0], 1.0)
+
+
+def test_a_store_is_ranked_by_shape_shape_by_shape_and_person_by_person(tmp_path):
+    """Stored bodies at hand-checked distances 1, 3 and 2 (an identity covariance) for two people,
+    one shape stored without a body: the shapes come nearest first, each person once at their
+    nearest, the shape without a body counted in a warning; a store without bodies answers None."""
+    store = SQLiteStore(tmp_path / "shapes.sqlite")
+    bodies = [StoredBody(np.array(c), 0.0) for c in ([1.0, 0.0], [0.0, 3.0], [0.0, -2.0])]
+    store.add_many(["ann", "ann", "bob"], np.ones((3, 4)), "test", bodies)
+    basis = BodyBasis(np.zeros((1, 3)), np.zeros((2, 1, 3)), np.ones((1, 1)), fit_residual_m=0.003)
+    fitted = FittedBody(np.zeros(2), np.eye(2), points=1000, residual_m=0.003)
+    assert shape_ranking(SQLiteStore(tmp_path / "empty.sqlite"), basis, fitted, top=5) is None
+    store.add("cy", np.ones(4), "test")
+    ranking = shape_ranking(store, basis, fitted, top=5)
+    assert [label for _, label, _ in ranking.shapes] == ["ann", "bob", "ann"]
+    assert [distance for _, _, distance in ranking.shapes] == pytest.approx([1.0, 2.0, 3.0])
+    assert [p.label for p in ranking.people] == ["ann", "bob"]
+    assert [p.distance for p in ranking.people] == pytest.approx([1.0, 2.0])
+    assert ranking.warnings == ["1 stored shapes have no body (none fitted their scan) and are not ranked"]

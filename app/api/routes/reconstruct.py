@@ -22,6 +22,7 @@ network's best guess of the person); the gap between the two spectra shows it.
 
 from typing import Annotated, Literal
 
+import anyio
 import numpy as np
 from fastapi import APIRouter, Query, Response
 from pydantic import Field
@@ -29,7 +30,7 @@ from pydantic import Field
 from app.api.examples import success
 from app.api.operands import CapHolesQuery
 from app.api.problems import ProblemError, problem_responses
-from app.api.rebuilt import BodyBy, RoundTrip, scanned_body
+from app.api.rebuilt import BodyBy, RoundTrip, fit_uploads, scanned_body
 from app.api.responses import UNION_PROBLEMS, UnionResponse
 from app.api.unions import UnionDep
 from app.inference.body import body_height, surface_area
@@ -113,7 +114,8 @@ async def reconstruct(
             501, "reconstruction-unavailable", "Reconstruction unavailable", "these models have no shape decoder"
         )
     outcome = await union.solved(cap_holes=cap_holes, locate=models.body is not None)
-    body = await scanned_body(union.request, models, outcome)
+    fit = await anyio.to_thread.run_sync(fit_uploads, models, outcome)
+    body = await scanned_body(union.request, models, outcome, fit)
     height, area = body_height(body.vertices), surface_area(body.vertices, models.template.faces)
     warnings = [*outcome.warnings, *round_trip_warnings(body.verdict, body.gap)]
     if body.not_fitted is not None:

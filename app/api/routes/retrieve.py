@@ -3,10 +3,13 @@
 The store holds complete shapes' closed spectra (ShapeDNA). An open surface — a whole body
 scanned with its soles or the top of its head unseen, or scans that leave a part out — has a
 boundary, and its spectrum is of another kind (λ₁ > 0, every eigenvalue raised): ranked as it
-is, the nearest stored shapes are the smallest bodies, whoever was scanned. Such a union is
-ranked through the body the shape decoder rebuilds from it, whose own closed spectrum is
-comparable (``benchmarks.retrieval_open_surfaces`` measures how much more often the right
-person comes first). That costs a solve, so the route is admitted like an upload
+is, the nearest stored shapes are the smallest bodies, whoever was scanned. Where every operand is an
+upload placed on the template, such a union is ranked by shape: the stored people's shape
+coefficients against those of the body fitted to the uploads' points, under what the uploads
+left unseen (:func:`app.sessions.identity.shape_ranking`, as a session's identity is ranked;
+``benchmarks.body_from_parts``); else through the body the shape decoder rebuilds from it,
+whose own closed spectrum is comparable (``benchmarks.retrieval_open_surfaces`` measures how
+much more often the right person comes first). That costs a solve, so the route is admitted like an upload
 (``app.main``). A whole-body scan uploaded as a mesh does better still with ``cap_holes=true``:
 its blind spots capped, it is a closed surface and ranked as one.
 
@@ -29,19 +32,19 @@ from app.api.deps import StoreDep
 from app.api.examples import success
 from app.api.operands import CapHolesQuery
 from app.api.problems import DATABASE_SLUGS, MODEL_SLUGS, UPLOAD_PROBLEMS, UPLOAD_SLUGS, problem_responses
-from app.api.rebuilt import RebuiltBody, scanned_body
-from app.api.responses import PersonAnswer, answered_people
+from app.api.rebuilt import RebuiltBody, UploadsFit, fit_uploads, scanned_body
+from app.api.responses import PersonAnswer, answered, answered_people
 from app.api.unions import UnionDep, UnionOutcome
 from app.contract import PROFILE_SHARES
 from app.inference.body import open_surface
 from app.inference.models import SpectralModels
 from app.retrieval.store import Match, ShapeStore
-from app.sessions.identity import SHAPES_PER_PERSON
+from app.sessions.identity import SHAPES_PER_PERSON, ShapeRanking, shape_ranking
 
 router = APIRouter(tags=["retrieval"])
 ROUTE = "/retrieve"  # an open surface's query solves the body rebuilt from it: admitted like an upload (app.main)
 MAX_TOP = 100
-RankedBy = Literal["union", "fitted_body", "rebuilt_body", "share_profile"]
+RankedBy = Literal["union", "shape", "fitted_body", "rebuilt_body", "share_profile"]
 RETRIEVE_RESPONSES = success("retrieve") | problem_responses(
     *UPLOAD_PROBLEMS, slugs=UPLOAD_SLUGS | MODEL_SLUGS | DATABASE_SLUGS
 )
@@ -50,7 +53,10 @@ RETRIEVE_RESPONSES = success("retrieve") | problem_responses(
 class MatchOut(BaseModel):
     id: str = Field(description="The stored shape's id.")
     label: str = Field(description="Its identity label.")
-    distance: float = Field(description="ShapeDNA distance: Euclidean on log λ₂…λ_k.")
+    distance: float = Field(
+        description="ShapeDNA distance (Euclidean on log λ₂…λ_k) from the spectrum ranked; ranked by shape, the "
+        "Mahalanobis distance of the shape's body from the fitted body's, under the fit's uncertainty."
+    )
     share: float | None = Field(
         default=None,
         description="Ranked by share profile: the overlap share (of the smaller operand inside the other) under "
@@ -61,16 +67,17 @@ class MatchOut(BaseModel):
 class RetrieveResponse(BaseModel):
     query: list[float] = Field(description="The union spectrum of the operands, 1/m².")
     ranked_by: RankedBy = Field(
-        description="union: the query itself was ranked (a closed surface, or rebuild=false); fitted_body: the "
-        "query is an open surface and every operand an upload: ranked through the body fitted to the uploads' "
-        "points (decision 039); rebuilt_body: the "
+        description="union: the query itself was ranked (a closed surface, or rebuild=false); shape: the query is "
+        "an open surface and every operand an upload: the stored shapes that have a body ranked by their person's "
+        "shape coefficients against the body fitted to the uploads' points (decisions 039, 049); fitted_body: the "
+        "same where no stored shape has a body, ranked by that body's closed spectrum; rebuilt_body: the "
         "query is an open surface (λ₁ > 1 % of λ₂), ranked through the body the shape decoder rebuilds from it; "
         "share_profile: two operands whose overlap was not told, a closed union, each stored shape ranked by the "
         "union told the share that brings it nearest (each match's share)."
     )
-    looked_up: list[float] = Field(
-        description="The spectrum ranked against the stored shapes: the query's, the rebuilt body's own, or by "
-        "share profile the union told the first match's share."
+    looked_up: list[float] | None = Field(
+        description="The spectrum ranked against the stored shapes: the query's, the fitted or rebuilt body's own, "
+        "or by share profile the union told the first match's share; null when ranked by shape."
     )
     matches: list[MatchOut] = Field(description="Nearest first: stored shapes, several poses of one person each.")
     people: list[PersonAnswer] = Field(
@@ -82,6 +89,10 @@ class RetrieveResponse(BaseModel):
     )
 
 
+SHAPE_NOTE = (
+    "the query is an open surface (λ₁ > 0), ranked by shape: each stored person's shape against the body fitted to "
+    "the uploads' points, what they left unseen counting against no one (the model card's bodies table)"
+)
 FITTED_NOTE = (
     "the query is an open surface (λ₁ > 0), ranked through the body fitted to the uploads' points, whose closed "
     "spectrum compares with the stored shapes' (5-view anny sessions: the model card's bodies table)"
@@ -120,10 +131,10 @@ def profiled(outcome: UnionOutcome, models: SpectralModels, profile: bool) -> bo
 
 
 async def looked_up_spectra(
-    request: Request, models: SpectralModels, outcome: UnionOutcome, rebuild: bool, profile: bool
+    request: Request, models: SpectralModels, outcome: UnionOutcome, rebuild: bool, profile: bool, fit: UploadsFit
 ) -> tuple[np.ndarray, RankedBy, list[str]]:
-    """The spectrum, or (m, k) spectra, to rank, how they were chosen, and the warnings that go
-    with them."""
+    """The spectrum, or (m, k) spectra, to rank, how they were chosen (an open union through
+    ``fit``'s body where one was fitted to the uploads), and the warnings that go with them."""
     union = outcome.result
     if profiled(outcome, models, profile):
         a, b = (np.asarray(o.eigenvalues, dtype=np.float64) for o in outcome.operands)
@@ -132,10 +143,23 @@ async def looked_up_spectra(
         return union.eigenvalues, "union", []
     if not rebuild or models.decoder_session is None:
         return union.eigenvalues, "union", [open_surface_warning(rebuild, None)]
-    body = await scanned_body(request, models, outcome)
+    body = await scanned_body(request, models, outcome, fit)
     if body.by == "fitted":
         return body.eigenvalues, "fitted_body", [FITTED_NOTE]
     return body.eigenvalues, "rebuilt_body", [open_surface_warning(rebuild, body)]
+
+
+def by_shape(outcome: UnionOutcome, ranking: ShapeRanking) -> RetrieveResponse:
+    """The answer ranked by shape: its shapes, its people with their calibrated confidences."""
+    people, ahead = answered(ranking.people, calibrated=True)
+    return RetrieveResponse(
+        query=outcome.result.eigenvalues.tolist(),
+        ranked_by="shape",
+        looked_up=None,
+        matches=[MatchOut(id=id_, label=label, distance=distance) for id_, label, distance in ranking.shapes],
+        people=people,
+        warnings=[*outcome.warnings, SHAPE_NOTE, *ahead, *ranking.warnings],
+    )
 
 
 def match_out(match: Match, ranked_by: RankedBy) -> MatchOut:
@@ -179,13 +203,21 @@ async def retrieve(
         ),
     ] = True,
 ) -> RetrieveResponse:
-    """The stored complete shapes nearest to the union of the operands (an open one through its rebuilt body,
-    two operands whose overlap is not told by their share profile)."""
+    """The stored complete shapes nearest to the union of the operands (an open one by the shape of the body
+    fitted to the uploads, or through its rebuilt body; two operands whose overlap is not told by their share
+    profile)."""
     models = union.models
     # An open query is ranked through the body fitted to where its uploads lie; one capped closed
     # scan is ranked as it is, so it is not placed.
     outcome = await union.solved(cap_holes=cap_holes, locate=models.body is not None and not cap_holes)
-    looked_up, ranked_by, notes = await looked_up_spectra(union.request, models, outcome, rebuild, profile)
+    fit = UploadsFit()
+    if rebuild and open_surface(outcome.result.eigenvalues):
+        fit = await anyio.to_thread.run_sync(fit_uploads, models, outcome)
+    if fit.fitted is not None:
+        ranking = await anyio.to_thread.run_sync(shape_ranking, store, models.body, fit.fitted, top)
+        if ranking is not None:
+            return by_shape(outcome, ranking)
+    looked_up, ranked_by, notes = await looked_up_spectra(union.request, models, outcome, rebuild, profile, fit)
     scale = models.body.identity_scale if ranked_by == "fitted_body" and models.body is not None else None
     matches, people, ahead, first = await ranked(store, looked_up, ranked_by, top, scale)
     return RetrieveResponse(

@@ -23,7 +23,7 @@ from app.api.routes.sessions import ROUTE, SESSION_SLUGS, SessionId, not_found
 from app.inference.bodyfit import FittedBody, NotEnoughSeen
 from app.inference.models import SpectralModels
 from app.sessions.body import SEEN, NoBodyFits, SessionBody, fitted_session, session_body
-from app.sessions.identity import SHAPES_PER_PERSON, ranked_by_shape, unknown_warning
+from app.sessions.identity import SHAPES_PER_PERSON, shape_ranking
 from app.sessions.reading import SessionState, session_state
 from app.sessions.records import SessionNotFound
 from app.sessions.session import session_coverage
@@ -120,21 +120,16 @@ async def session_identity_route(
     with a calibrated confidence."""
     state = await _session(request, models, sessions, session_id)
     fitted = await _fit(_fitted, models, state)
-    basis = models.body
-    bodies = await anyio.to_thread.run_sync(store.bodies)
+    by_shape = await anyio.to_thread.run_sync(shape_ranking, store, models.body, fitted, top)
     common = {"id": session_id, "model_version": models.version, "views": len(state.views)}
-    if bodies.ids:
-        unknown = basis.unknown_for(fitted.residual_m)
-        ranked = ranked_by_shape(fitted, bodies, top, basis.shape_identity_scale, unknown)
-        people, warnings = answered(ranked, calibrated=True)
-        warnings += unknown_warning(ranked[0] if ranked else None, unknown)
-        unranked = await anyio.to_thread.run_sync(store.count) - len(bodies.ids)
-        if unranked:
-            warnings.append(f"{unranked} stored shapes have no body (none fitted their scan) and are not ranked")
-        return IdentityAnswer(**common, ranked_by="shape", looked_up=None, people=people, warnings=warnings)
-    _, spectrum = await solved_body(request, models, fitted.vertices(basis))
+    if by_shape is not None:
+        people, warnings = answered(by_shape.people, calibrated=True)
+        return IdentityAnswer(
+            **common, ranked_by="shape", looked_up=None, people=people, warnings=[*warnings, *by_shape.warnings]
+        )
+    _, spectrum = await solved_body(request, models, fitted.vertices(models.body))
     matches = await anyio.to_thread.run_sync(store.nearest, spectrum, top * SHAPES_PER_PERSON)
-    people, warnings = answered_people(matches, top, basis.identity_scale)
+    people, warnings = answered_people(matches, top, models.body.identity_scale)
     return IdentityAnswer(
         **common, ranked_by="fitted_body", looked_up=spectrum.tolist(), people=people, warnings=warnings
     )
