@@ -22,7 +22,8 @@ every eigenvalue comes out too high. A few boundary points that make no curve wi
 are freed for the same reason. What the views' geometry cannot tell (whether a seam a face wide
 between two views is covered), another reading can (``inside``: :mod:`app.sessions.seen`). These
 rules, not the glued Laplacian, are what a registered session's error is left in; the readings
-tried in their place are measured in ``docs/decisions/046-the-fused-boundary-stays-rule-based.md``.
+tried in their place are measured in ``docs/decisions/046-the-fused-boundary-stays-rule-based.md``
+and ``050-a-session-boundary-is-not-decided-by-loops-or-thresholds.md``.
 
 A view whose every point lies on another view adds nothing and goes first (a re-scan, a close-up,
 a part sent with its re-meshed copy: the union is the other view, exactly). Where every view is
