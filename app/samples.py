@@ -29,6 +29,16 @@ SESSION_SCANS = {
     "head_torso_left_arm.ply": ("head", "neck", "torso", "left_upper_arm", "left_forearm", "left_hand"),
     "torso_hips_right_leg.ply": ("torso", "hips", "right_thigh", "right_shin", "right_foot"),
 }
+# Three scans that together cover the body (the session's two and a third for the rest), and the
+# same three short of the right forearm and hand: what an integrator cuts from one stored shape.
+COVERING_SCANS = (
+    *SESSION_SCANS.values(),
+    ("torso", "hips", "left_thigh", "left_shin", "left_foot", "right_upper_arm", "right_forearm", "right_hand"),
+)
+SHORT_OF_A_HAND = (
+    *SESSION_SCANS.values(),
+    ("torso", "hips", "left_thigh", "left_shin", "left_foot", "right_upper_arm"),
+)
 BODY_FILE, BODY_SCALE = "body.ply", 1.04  # a complete body of another size: an identity to store
 SPECTRA_FILE = "spectra.json"
 

@@ -90,7 +90,8 @@ def shape_ranking(store: ShapeStore, basis: BodyBasis, fitted: FittedBody, top: 
     distance = shape_distances(fitted, bodies)
     rows = list(zip(bodies.labels, bodies.ids, distance.tolist(), strict=True))
     people = ranked_rows(rows, top, basis.shape_identity_scale, unknown)
-    shapes = [(bodies.ids[i], bodies.labels[i], float(distance[i])) for i in np.argsort(distance)[:top]]
+    order = np.argsort(distance, kind="stable")[:top]  # ties (one person's shapes at rest) as `people` breaks them
+    shapes = [(bodies.ids[i], bodies.labels[i], float(distance[i])) for i in order]
     warnings = unknown_warning(people[0] if people else None, unknown)
     unranked = store.count() - len(bodies.ids)
     if unranked:

@@ -88,4 +88,7 @@ def test_a_store_is_ranked_by_shape_shape_by_shape_and_person_by_person(tmp_path
     assert [distance for _, _, distance in ranking.shapes] == pytest.approx([1.0, 2.0, 3.0])
     assert [p.label for p in ranking.people] == ["ann", "bob"]
     assert [p.distance for p in ranking.people] == pytest.approx([1.0, 2.0])
+    store.add_many(["bob"], np.ones((1, 4)), "test", [StoredBody(np.array([0.0, -2.0]), 0.0)])  # a tie
+    tied = shape_ranking(store, basis, fitted, top=5)
+    assert [shape_id for shape_id, label, _ in tied.shapes if label == "bob"][0] == tied.people[1].shape_id
     assert ranking.warnings == ["1 stored shapes have no body (none fitted their scan) and are not ranked"]

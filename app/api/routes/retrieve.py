@@ -190,8 +190,9 @@ async def retrieve(
     rebuild: Annotated[
         bool,
         Query(
-            description="Rank an open surface (λ₁ > 0: a scan with holes) through the body the shape decoder "
-            "rebuilds from it (one more solve); false ranks its own spectrum as given."
+            description="Rank an open surface (λ₁ > 0: a scan with holes), or a union of several uploads, by the "
+            "body fitted to the uploads or the shape decoder rebuilds from the union; false ranks the union's own "
+            "spectrum as given."
         ),
     ] = True,
     cap_holes: CapHolesQuery = False,
@@ -207,11 +208,12 @@ async def retrieve(
     fitted to the uploads, or through its rebuilt body; two operands whose overlap is not told by their share
     profile)."""
     models = union.models
-    # An open query is ranked through the body fitted to where its uploads lie; one capped closed
-    # scan is ranked as it is, so it is not placed.
+    # An open query, or a union glued from several uploads (which errs where the body nearly
+    # touches itself: decision 050), is ranked by the body fitted to where its uploads lie; one
+    # closed scan, or one capped, is ranked by its own spectrum.
     outcome = await union.solved(cap_holes=cap_holes, locate=models.body is not None and not cap_holes)
     fit = UploadsFit()
-    if rebuild and open_surface(outcome.result.eigenvalues):
+    if rebuild and (open_surface(outcome.result.eigenvalues) or len(outcome.operands) > 1):
         fit = await anyio.to_thread.run_sync(fit_uploads, models, outcome)
     if fit.fitted is not None:
         ranking = await anyio.to_thread.run_sync(shape_ranking, store, models.body, fit.fitted, top)
