@@ -56,6 +56,11 @@ def template_part(template: Template, removed: tuple[str, ...]) -> bytes:
     return mesh.export(file_type="ply")
 
 
+def kept_part(template: Template, kept: tuple[str, ...]) -> bytes:
+    """:func:`template_part` holding only the body parts ``kept``."""
+    return template_part(template, tuple(name for name in PART_NAMES if name not in kept))
+
+
 def template_part_mesh(template: Template, removed: tuple[str, ...]) -> Mesh:
     """:func:`template_part` read back by the service's own upload reader: the arrays an upload
     of that file carries, for timing and testing what the service does with it."""
@@ -87,7 +92,7 @@ def write_samples(folder: Path, template: Template) -> list[Path]:
     written.append(_write(folder / BODY_FILE, body.export(file_type="ply")))
     written.append(_write(folder / SPECTRA_FILE, json.dumps(spectra).encode()))
     for name, kept in SESSION_SCANS.items():
-        written.append(_write(folder / name, template_part(template, tuple(p for p in PART_NAMES if p not in kept))))
+        written.append(_write(folder / name, kept_part(template, kept)))
     return written
 
 

@@ -25,9 +25,9 @@ import trimesh
 from fastapi.testclient import TestClient
 
 from app.core.config import Settings
-from app.inference.template import PART_NAMES, Template
+from app.inference.template import Template
 from app.main import create_app
-from app.samples import COVERING_SCANS, SHORT_OF_A_HAND, template_part
+from app.samples import COVERING_SCANS, SHORT_OF_A_HAND, kept_part
 from training.sessions.scans import EVERYONE, people
 
 KEY = "benchmark"
@@ -53,10 +53,7 @@ def retrieved(
 ) -> dict:
     """``/v1/retrieve`` of the scans of ``body`` that keep each of ``kept``'s body parts."""
     posed = replace(template, vertices=body)
-    files = [
-        ("files", (f"scan{i}.ply", template_part(posed, tuple(p for p in PART_NAMES if p not in parts))))
-        for i, parts in enumerate(kept)
-    ]
+    files = [("files", (f"scan{i}.ply", kept_part(posed, parts))) for i, parts in enumerate(kept)]
     response = client.post("/v1/retrieve", params={"top": 5, "rebuild": rebuild}, files=files)
     response.raise_for_status()
     return response.json()

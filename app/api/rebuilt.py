@@ -99,7 +99,7 @@ class UploadsFit:
 
 def fit_uploads(models: SpectralModels, outcome: UnionOutcome) -> UploadsFit:
     """The body fitted to the uploads' points through their places, in frames and poses of their
-    own (decision 039: 5 views ~10 mm where their union's spectrum decodes to ~75), where every
+    own (decision 039: nearer the person than their union's spectrum decoded), where every
     operand is an upload placed on the template and the models have a body. Blocking: a few
     seconds of one core at most (it reads at most ``FIT_POINTS`` points)."""
     parts = [operand.part for operand in outcome.operands]

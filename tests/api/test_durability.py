@@ -12,8 +12,8 @@ import psycopg
 import pytest
 
 from app.core.config import Settings
-from app.inference.template import PART_NAMES, Template
-from app.samples import SESSION_SCANS, template_part
+from app.inference.template import Template
+from app.samples import SESSION_SCANS, kept_part
 from tests.api.conftest import API_KEY
 from tests.api.servers import start, wait_ready
 from tests.api.test_shapes_api import body_ply
@@ -154,7 +154,7 @@ def test_views_posted_at_once_to_a_session_all_land_and_survive_a_kill_9(databas
     """A front-end's views posted together: each one answered 201 is in the session after the
     server is killed mid-burst and started again, once, whatever the others did."""
     template = Template.load(Settings().models_dir)
-    scans = [template_part(template, tuple(p for p in PART_NAMES if p not in kept)) for kept in SESSION_SCANS.values()]
+    scans = [kept_part(template, kept) for kept in SESSION_SCANS.values()]
     process, base = served(database)
     acknowledged: list[str] = []
     errors: list[BaseException] = []

@@ -157,12 +157,9 @@ def test_scans_cut_from_a_stored_body_find_it_through_the_body_fitted_to_them(cl
     and hand: their union is an open surface, ranked by the shape of the body fitted to their points,
     which finds the body they were cut from first (ranked through the union decoded, such scans did
     not find it in the top 100)."""
-    from app.samples import SHORT_OF_A_HAND, template_part
+    from app.samples import SHORT_OF_A_HAND, kept_part
 
-    files = [
-        ("files", (f"scan{i}.ply", template_part(template, tuple(p for p in PART_NAMES if p not in parts))))
-        for i, parts in enumerate(SHORT_OF_A_HAND)
-    ]
+    files = [("files", (f"scan{i}.ply", kept_part(template, parts))) for i, parts in enumerate(SHORT_OF_A_HAND)]
     response = client.post("/v1/retrieve", params={"top": 5}, files=files)
     assert response.status_code == 200, response.text
     answer = response.json()
@@ -179,12 +176,9 @@ def test_scans_cut_from_a_stored_body_find_it_through_the_body_fitted_to_them(cl
 def test_uploads_are_ranked_by_the_fitted_body_s_spectrum_where_no_stored_shape_has_a_body(tmp_path, template):
     """Seeded without the seed people's bodies, no stored shape has one to rank by shape: an open
     union of uploads is ranked by the fitted body's closed spectrum instead, and says so."""
-    from app.samples import SESSION_SCANS, template_part
+    from app.samples import SESSION_SCANS, kept_part
 
-    files = [
-        ("files", (f"scan{i}.ply", template_part(template, tuple(p for p in PART_NAMES if p not in parts))))
-        for i, parts in enumerate(SESSION_SCANS.values())
-    ]
+    files = [("files", (f"scan{i}.ply", kept_part(template, parts))) for i, parts in enumerate(SESSION_SCANS.values())]
     with TestClient(create_app(settings_without(tmp_path, SEED_BODIES_FILE))) as bare:
         response = bare.post("/v1/retrieve", params={"top": 3}, files=files)
     assert response.status_code == 200, response.text

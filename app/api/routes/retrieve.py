@@ -3,13 +3,14 @@
 The store holds complete shapes' closed spectra (ShapeDNA). An open surface — a whole body
 scanned with its soles or the top of its head unseen, or scans that leave a part out — has a
 boundary, and its spectrum is of another kind (λ₁ > 0, every eigenvalue raised): ranked as it
-is, the nearest stored shapes are the smallest bodies, whoever was scanned. Where every operand is an
-upload placed on the template, such a union is ranked by shape: the stored people's shape
-coefficients against those of the body fitted to the uploads' points, under what the uploads
-left unseen (:func:`app.sessions.identity.shape_ranking`, as a session's identity is ranked;
-``benchmarks.body_from_parts``); else through the body the shape decoder rebuilds from it,
-whose own closed spectrum is comparable (``benchmarks.retrieval_open_surfaces`` measures how
-much more often the right person comes first). That costs a solve, so the route is admitted like an upload
+is, the nearest stored shapes are the smallest bodies, whoever was scanned. Where every operand
+is an upload placed on the template, such a union, and any union of several uploads, is ranked
+by shape: the stored people's shape coefficients against those of the body fitted to the
+uploads' points, under what the uploads left unseen (:func:`app.sessions.identity.shape_ranking`,
+as a session's identity is ranked; ``benchmarks.body_from_parts``); else through the body the
+shape decoder rebuilds from it, whose own closed spectrum is comparable
+(``benchmarks.retrieval_open_surfaces`` measures how much more often the right person comes
+first). That costs a solve, so the route is admitted like an upload
 (``app.main``). A whole-body scan uploaded as a mesh does better still with ``cap_holes=true``:
 its blind spots capped, it is a closed surface and ranked as one.
 
@@ -67,10 +68,11 @@ class MatchOut(BaseModel):
 class RetrieveResponse(BaseModel):
     query: list[float] = Field(description="The union spectrum of the operands, 1/m².")
     ranked_by: RankedBy = Field(
-        description="union: the query itself was ranked (a closed surface, or rebuild=false); shape: the query is "
-        "an open surface and every operand an upload: the stored shapes that have a body ranked by their person's "
-        "shape coefficients against the body fitted to the uploads' points (decisions 039, 049); fitted_body: the "
-        "same where no stored shape has a body, ranked by that body's closed spectrum; rebuilt_body: the "
+        description="union: the query itself was ranked (a closed surface, or rebuild=false); shape: every "
+        "operand an upload, the query an open surface or a union of several: the stored shapes that have a body "
+        "ranked by their person's shape coefficients against the body fitted to the uploads' points (decisions "
+        "039, 049); fitted_body: the same where no stored shape has a body, ranked by that body's closed "
+        "spectrum; rebuilt_body: the "
         "query is an open surface (λ₁ > 1 % of λ₂), ranked through the body the shape decoder rebuilds from it; "
         "share_profile: two operands whose overlap was not told, a closed union, each stored shape ranked by the "
         "union told the share that brings it nearest (each match's share)."
@@ -90,8 +92,8 @@ class RetrieveResponse(BaseModel):
 
 
 SHAPE_NOTE = (
-    "the query is an open surface (λ₁ > 0), ranked by shape: each stored person's shape against the body fitted to "
-    "the uploads' points, what they left unseen counting against no one (the model card's bodies table)"
+    "ranked by shape: each stored person's shape against the body fitted to the uploads' points, what they left "
+    "unseen counting against no one (the model card's bodies table)"
 )
 FITTED_NOTE = (
     "the query is an open surface (λ₁ > 0), ranked through the body fitted to the uploads' points, whose closed "
