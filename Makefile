@@ -51,7 +51,7 @@ bodies: $(BIN)/.train  ## the body basis sessions are fitted with, its intervals
 models: dataset train decoder correspondence sessions bodies  ## everything from scratch: data → training → evaluation → export
 
 lint: $(BIN)/.installed
-	$(BIN)/ruff check app training tests benchmarks
+	$(BIN)/ruff check app training tests benchmarks harness
 
 bench: $(BIN)/.train  ## spectrum speed against LaPy on anny bodies
 	$(BIN)/python benchmarks/bench_spectrum.py

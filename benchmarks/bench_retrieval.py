@@ -104,7 +104,7 @@ def main() -> None:
     server = None
     url = args.postgres_url
     if url is None and "postgresql" in args.backends:
-        from tests.postgres import ThrowawayPostgres  # the test suite's server, started the same way
+        from harness.postgres import ThrowawayPostgres  # the test suite's server, started the same way
 
         server = ThrowawayPostgres()
         server.start()

@@ -32,8 +32,8 @@ import trimesh
 from app.core.config import Settings
 from app.inference.template import Template
 from app.samples import template_part
-from tests.api.servers import start, wait_ready
-from tests.postgres import ThrowawayPostgres, free_port
+from harness.postgres import ThrowawayPostgres, free_port
+from harness.servers import start, wait_ready
 
 TEMPLATE = Template.load(Settings().models_dir)
 PART = template_part(TEMPLATE, ("head", "neck"))

@@ -47,9 +47,9 @@ from app.core.config import Settings
 from app.geometry.shapes import Mesh
 from app.inference.template import Template
 from app.samples import template_part
-from tests.api.servers import start, wait_ready
-from tests.builders import glb_of, instanced_glb, mesh_bytes
-from tests.postgres import free_port
+from harness.builders import glb_of, instanced_glb, mesh_bytes
+from harness.postgres import free_port
+from harness.servers import start, wait_ready
 
 
 def _disk(points: int, seed: int = 0) -> Mesh:

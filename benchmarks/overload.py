@@ -31,8 +31,8 @@ import numpy as np
 from app.core.config import Settings
 from app.inference.template import Template
 from app.samples import PARTS, template_part
-from tests.api.servers import start, wait_ready
-from tests.postgres import free_port
+from harness.postgres import free_port
+from harness.servers import start, wait_ready
 
 
 def tree_rss_mb(pid: int) -> float:

@@ -27,7 +27,7 @@ from app.geometry.overlap import TOKEN_PREFIX
 from app.inference.region_tokens import PREFIX as REGION_TOKEN_PREFIX
 from app.inference.template import Template
 from app.samples import sample_overlap, write_samples
-from tests.readme import (
+from harness.readme import (
     BEGIN,
     CLIENT_BEGIN,
     CLIENT_END,
@@ -210,7 +210,7 @@ def examples(overlap: float) -> list[Example]:
 
 
 def run(example: Example, folder: Path, url: str = URL) -> str:
-    """What ``example``'s command prints (:func:`tests.readme.run_command`)."""
+    """What ``example``'s command prints (:func:`harness.readme.run_command`)."""
     return run_command(example.command, folder, url)
 
 

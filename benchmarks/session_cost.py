@@ -20,8 +20,8 @@ from pathlib import Path
 import httpx
 import trimesh
 
-from tests.api.servers import start, wait_ready
-from tests.postgres import free_port
+from harness.postgres import free_port
+from harness.servers import start, wait_ready
 from training.sessions.scans import people, view_meshes
 
 

@@ -6,7 +6,7 @@ import trimesh
 from scipy.spatial import Delaunay
 
 from app.geometry.shapes import Mesh
-from tests.postgres import postgres_url  # noqa: F401  (a session fixture shared by every folder)
+from harness.postgres import ThrowawayPostgres
 
 
 def disk(radius: float = 1.0, rings: int = 30) -> Mesh:
@@ -51,3 +51,15 @@ def bumpy_patch(seed: int = 0, n: int = 900) -> Mesh:
 @pytest.fixture(scope="session")
 def patch() -> Mesh:
     return bumpy_patch()
+
+
+@pytest.fixture(scope="session")
+def postgres_url():
+    """A throw-away PostgreSQL server's URL, shared by every folder; skipped where none can start."""
+    try:
+        server = ThrowawayPostgres()
+    except FileNotFoundError as exc:
+        pytest.skip(str(exc))
+    server.start()
+    yield server.url
+    server.remove()

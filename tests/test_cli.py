@@ -11,8 +11,8 @@ from app.cli import cli
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum, spectrum_from_bytes
 from app.main import create_app
 from app.samples import BODY_FILE, PARTS, SESSION_SCANS, SPECTRA_FILE
+from harness.builders import ascii_ply
 from tests.api.conftest import settings_for
-from tests.builders import ascii_ply
 from tests.conftest import sphere
 
 

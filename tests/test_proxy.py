@@ -17,8 +17,8 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.api.servers import start, wait_ready
-from tests.postgres import free_port
+from harness.postgres import free_port
+from harness.servers import start, wait_ready
 
 ROOT = Path(__file__).resolve().parents[1]
 NGINX = shutil.which("nginx") or next((p for p in ("/usr/sbin/nginx",) if Path(p).exists()), None)

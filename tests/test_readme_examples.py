@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.api.servers import serving
-from tests.readme import KEY, URL, client_code, readme_commands, run_client, run_command
+from harness.readme import KEY, URL, client_code, readme_commands, run_client, run_command
+from harness.servers import serving
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()

@@ -12,9 +12,9 @@ from app.inference.manifest import write_manifest
 from app.inference.template import Template
 from app.main import create_app
 from app.samples import PARTS, template_part
+from harness.servers import API_KEY
 
 UPLOAD_CAP = 2_000_000
-API_KEY = "test-key-0123456789"
 
 
 def settings_for(database) -> Settings:

@@ -13,7 +13,7 @@ import httpx
 import numpy as np
 import pytest
 
-from tests.api.servers import serving
+from harness.servers import serving
 from tests.api.test_backpressure import patch_ply
 
 BODY_TIMEOUT_S = 5

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import trimesh
 
+from harness.builders import ascii_ply, mesh_bytes, npy_bytes
 from tests.api.conftest import API_KEY
 from tests.api.test_spectrum_api import assert_problem, post
-from tests.builders import ascii_ply, mesh_bytes, npy_bytes
 from tests.conftest import bumpy_patch, sphere
 
 K = 20

@@ -10,8 +10,8 @@ from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
 from app.inference.template import Template
 from app.samples import PARTS, template_part
+from harness.builders import mesh_bytes
 from tests.api.conftest import API_KEY
-from tests.builders import mesh_bytes
 from tests.conftest import bumpy_patch, sphere
 
 

@@ -19,9 +19,9 @@ from app.contract import CORRESPONDENCE_FILE
 from app.inference.template import PART_NAMES
 from app.main import create_app
 from app.samples import PARTS
+from harness.builders import ascii_ply
 from tests.api.conftest import correspond, settings_for, settings_without
 from tests.api.test_spectrum_api import assert_problem
-from tests.builders import ascii_ply
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 

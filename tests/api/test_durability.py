@@ -14,10 +14,10 @@ import pytest
 from app.core.config import Settings
 from app.inference.template import Template
 from app.samples import SESSION_SCANS, kept_part
+from harness.postgres import free_port
+from harness.servers import start, wait_ready
 from tests.api.conftest import API_KEY
-from tests.api.servers import start, wait_ready
 from tests.api.test_shapes_api import body_ply
-from tests.postgres import free_port
 
 BURST = 8
 

@@ -11,8 +11,8 @@ from app.cli import cli
 from app.geometry.laplacian import mesh_operators
 from app.geometry.shapes import Mesh
 from app.geometry.topology import boundary_vertex_mask
+from harness.builders import mesh_bytes
 from tests.api.test_spectrum_api import assert_problem, post
-from tests.builders import mesh_bytes
 from tests.conftest import bumpy_patch, grid
 
 K = 8

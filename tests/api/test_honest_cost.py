@@ -14,9 +14,9 @@ from fastapi.testclient import TestClient
 from app.geometry.declared import MAX_SCENE_NODES
 from app.geometry.validate import MAX_FACES_PER_EDGE
 from app.main import create_app
+from harness.builders import ascii_ply, instanced_glb, mesh_bytes
 from tests.api.conftest import settings_for
 from tests.api.test_spectrum_api import assert_problem, post
-from tests.builders import ascii_ply, instanced_glb, mesh_bytes
 from tests.conftest import bumpy_patch, disk, sphere
 
 

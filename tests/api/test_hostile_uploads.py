@@ -15,8 +15,8 @@ from importlib.metadata import version
 import pytest
 import starlette.formparsers
 
+from harness.builders import mesh_bytes
 from tests.api.test_spectrum_api import assert_problem, post
-from tests.builders import mesh_bytes
 from tests.conftest import bumpy_patch
 
 # Advisories against the multipart stack with the release that fixed each; the pins must be at

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from harness.builders import ascii_ply
 from tests.api.conftest import correspond
-from tests.builders import ascii_ply
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 

@@ -10,8 +10,8 @@ from fastapi.testclient import TestClient
 
 from app.core.config import Settings
 from app.main import create_app
+from harness.postgres import free_port
 from tests.api.conftest import settings_for
-from tests.postgres import free_port
 
 
 def spectra_form() -> dict:

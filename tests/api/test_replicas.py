@@ -10,10 +10,10 @@ import httpx
 import psycopg
 import pytest
 
+from harness.postgres import free_port
+from harness.servers import start, wait_ready
 from tests.api.conftest import API_KEY
-from tests.api.servers import start, wait_ready
 from tests.api.test_shapes_api import body_ply
-from tests.postgres import free_port
 
 
 @pytest.fixture(scope="module")

@@ -10,9 +10,9 @@ import schemathesis
 from hypothesis import HealthCheck, settings
 
 from app.main import create_app
+from harness.postgres import free_port
+from harness.servers import start, wait_ready
 from tests.api.conftest import API_KEY
-from tests.api.servers import start, wait_ready
-from tests.postgres import free_port
 
 # A schema-valid request is not always a valid shape: any bytes satisfy ``format: binary`` and
 # any string the ``spectra`` field, so for positive data a 415 (file type) or 422 (the bytes or

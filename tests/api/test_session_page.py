@@ -29,7 +29,7 @@ from app.core.config import Settings
 from app.geometry.topology import drop_unreferenced
 from app.inference.template import Template
 from app.samples import SESSION_SCANS, write_samples
-from tests.api.servers import serving
+from harness.servers import serving
 from training.reconstruction.blind_spots import above_soles
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

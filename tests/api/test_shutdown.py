@@ -9,9 +9,9 @@ import numpy as np
 from fastapi import FastAPI
 
 from app.api.shutdown import flip_readiness_on_exit_signals
-from tests.api.servers import start, wait_ready
+from harness.postgres import free_port
+from harness.servers import start, wait_ready
 from tests.api.test_solver_limits import LARGE
-from tests.postgres import free_port
 
 CAPS = {"SPECTRAL_UNIONS_MAX_UPLOAD_BYTES": "32000000", "SPECTRAL_UNIONS_MAX_VERTICES": "200000"}
 

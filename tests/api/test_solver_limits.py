@@ -21,8 +21,8 @@ from threadpoolctl import threadpool_info
 from app.api.solver import SolverPool
 from app.geometry.pipeline import SpectrumOptions
 from app.main import create_app
+from harness.builders import mesh_bytes
 from tests.api.conftest import settings_for
-from tests.builders import mesh_bytes
 from tests.conftest import bumpy_patch, grid
 
 LARGE = mesh_bytes(grid(1.0, 1.0, 315, 315), "ply")  # ~100 k vertices: seconds and ~300 MB to solve

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
-from tests.api.conftest import UPLOAD_CAP
-from tests.builders import (
+from harness.builders import (
     ascii_ply,
     external_buffer,
     glb_with_external_buffer,
@@ -15,6 +14,7 @@ from tests.builders import (
     npy_bytes,
     zip_of,
 )
+from tests.api.conftest import UPLOAD_CAP
 from tests.conftest import disk, sphere
 
 TRIANGLE = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])

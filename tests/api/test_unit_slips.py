@@ -6,8 +6,8 @@ import json
 import numpy as np
 
 from app.geometry.plausibility import MAX_SIZE_RATIO, PLAUSIBLE_AREA_M2, size_warnings
+from harness.builders import mesh_bytes
 from tests.api.test_spectrum_api import post
-from tests.builders import mesh_bytes
 from tests.conftest import bumpy_patch
 
 

@@ -9,7 +9,7 @@ from app.geometry import io as geometry_io
 from app.geometry.errors import TooManyVertices, UnreadableFile, library_reason
 from app.geometry.io import load_shape
 from app.geometry.shapes import Mesh
-from tests.builders import ascii_ply, glb_of, mesh_bytes
+from harness.builders import ascii_ply, glb_of, mesh_bytes
 from tests.conftest import bumpy_patch
 
 CAP = 50_000

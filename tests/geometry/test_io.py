@@ -10,7 +10,7 @@ from app.geometry.errors import TooManyVertices, UnreadableFile, UnsupportedFile
 from app.geometry.io import ExternalReference, load_shape, resolve_file_type, unit_scale
 from app.geometry.pipeline import SpectrumOptions, spectrum_from_bytes
 from app.geometry.shapes import Mesh, PointCloud
-from tests.builders import (
+from harness.builders import (
     ascii_ply,
     external_buffer,
     glb_with_external_buffer,

@@ -9,7 +9,7 @@ from hypothesis.extra.numpy import arrays
 from app.geometry.errors import GeometryError
 from app.geometry.pipeline import SpectrumOptions, cloud_spectrum, mesh_spectrum, spectrum_from_bytes
 from app.geometry.shapes import Mesh, PointCloud
-from tests.builders import mesh_bytes, npy_bytes
+from harness.builders import mesh_bytes, npy_bytes
 from tests.conftest import bumpy_patch
 
 coordinates = st.one_of(st.floats(-2.0, 2.0), st.sampled_from([np.nan, np.inf, -np.inf, 1e308, -1e308, 0.0, 1e-300]))

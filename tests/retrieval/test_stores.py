@@ -100,7 +100,7 @@ def test_postgres_reuses_connections_across_a_server_restart(tmp_path):
     """Idle connections kept for reuse die with the server: the next call after a restart must
     find that out and reconnect, not fail; a call while the server is down is unavailable."""
     from app.retrieval.store import StoreUnavailable
-    from tests.postgres import ThrowawayPostgres
+    from harness.postgres import ThrowawayPostgres
 
     try:
         server = ThrowawayPostgres()

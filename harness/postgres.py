@@ -1,7 +1,8 @@
-"""A throw-away PostgreSQL server for the tests: initdb in a temporary folder, a free port.
+"""A throw-away PostgreSQL server for the tests and benchmarks: initdb in a temporary folder, a free port.
 
 No mocks: transactions, snapshots, advisory locks and triggers are PostgreSQL's own.
-When the server binaries are missing (``.ci/run`` installs them) the PostgreSQL cases skip.
+When the server binaries are missing (``.ci/run`` installs them) it cannot start: the PostgreSQL
+tests skip.
 """
 
 import glob
@@ -14,7 +15,6 @@ import time
 from pathlib import Path
 
 import psycopg
-import pytest
 
 
 def _binary(name: str) -> str | None:
@@ -75,14 +75,3 @@ class ThrowawayPostgres:
     def remove(self) -> None:
         self.stop()
         shutil.rmtree(self.root, ignore_errors=True)
-
-
-@pytest.fixture(scope="session")
-def postgres_url():
-    try:
-        server = ThrowawayPostgres()
-    except FileNotFoundError as exc:
-        pytest.skip(str(exc))
-    server.start()
-    yield server.url
-    server.remove()

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import httpx
 
-from tests.api.conftest import API_KEY
-from tests.postgres import free_port
+from harness.postgres import free_port
 
 STARTUP_SECONDS = 60
+API_KEY = "test-key-0123456789"  # the key every test and benchmark server is started with
 
 
 def start(port: int, settings: dict[str, str]) -> subprocess.Popen:
