@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from app.geometry.laplacian import mesh_operators
-from app.inference.template import RegionBoundaries, boundary_share
+from app.geometry import mesh_operators
+from app.inference import RegionBoundaries, boundary_share
 from training.data.spectra import MESH
 from training.data.template import Template
 

@@ -15,10 +15,8 @@ from pathlib import Path
 
 from threadpoolctl import threadpool_limits
 
-from app.geometry.laplacian import mesh_operators
-from app.geometry.placing import mesh_part
-from app.inference.correspondence import CorrespondenceModel
-from app.inference.models import SpectralModels
+from app.geometry import mesh_operators, mesh_part
+from app.inference import CorrespondenceModel, SpectralModels
 from app.samples import PARTS, template_part_mesh
 from training.common.timing import interleaved_ms
 

@@ -31,14 +31,17 @@ from pathlib import Path
 
 import numpy as np
 
-from app.geometry.descriptors import BOUNDARY_COLUMN
-from app.geometry.laplacian import mesh_operators, point_cloud_operators
-from app.geometry.placing import Part, cloud_part, mesh_part
-from app.inference.correspondence import CorrespondenceModel, Placement
-from app.inference.cover import Cover
-from app.inference.models import SpectralModels
-from app.inference.nesting import NESTED_OVERLAP, Nesting, inner_confidence
-from app.inference.template import Template
+from app.geometry import BOUNDARY_COLUMN, Part, cloud_part, mesh_operators, mesh_part, point_cloud_operators
+from app.inference import (
+    NESTED_OVERLAP,
+    CorrespondenceModel,
+    Cover,
+    Nesting,
+    Placement,
+    SpectralModels,
+    Template,
+    inner_confidence,
+)
 from training.common.spectral_errors import spectral_errors
 from training.correspondence.pairs import PAIR_SETS, VALIDATION_SETS, load_pairs
 from training.correspondence.parts import VARIANTS

@@ -26,8 +26,8 @@ import torch
 from scipy.sparse.csgraph import dijkstra
 from torch import nn
 
-from app.geometry.descriptors import FEATURES
-from app.inference.template import edge_graph
+from app.geometry import FEATURES
+from app.inference import edge_graph
 
 
 @dataclass(frozen=True)

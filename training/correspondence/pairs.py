@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from app.geometry.errors import GeometryError
+from app.geometry import GeometryError
 from training.correspondence.parts import PartsPreset, part_geometry, part_of
 from training.data.camera import scan_session
 from training.data.overlaps import CAMERA_CLOSE_UP, CAMERA_FAR, CAMERA_NEXT, CAMERA_POSE, CAMERA_RESCAN, ORBIT

@@ -29,12 +29,19 @@ from scipy.spatial import cKDTree
 from threadpoolctl import threadpool_limits
 
 from app.contract import CORRESPONDENCE_BASIS, MAX_HOLE_EDGES
-from app.geometry.descriptors import PartInputs, cloud_inputs, mesh_inputs
-from app.geometry.errors import GeometryError
-from app.geometry.shapes import Mesh, PointCloud
-from app.geometry.topology import boundary_vertex_mask, referenced
-from app.geometry.validate import prepare_cloud, prepare_mesh
-from app.inference.template import faces_inside
+from app.geometry import (
+    GeometryError,
+    Mesh,
+    PartInputs,
+    PointCloud,
+    boundary_vertex_mask,
+    cloud_inputs,
+    mesh_inputs,
+    prepare_cloud,
+    prepare_mesh,
+    referenced,
+)
+from app.inference import faces_inside
 from training.data.camera import (
     CLOSE_UP_DISTANCE,
     DISTANCE,

@@ -12,9 +12,7 @@ from pathlib import Path
 import onnx
 
 from app.contract import CORRESPONDENCE_FILE
-from app.inference.correspondence import TELL_BELOW_KEY, UNCERTAIN_BELOW_KEY
-from app.inference.manifest import write_manifest
-from app.inference.nesting import NESTED_BELOW_KEY
+from app.inference import NESTED_BELOW_KEY, TELL_BELOW_KEY, UNCERTAIN_BELOW_KEY, write_manifest
 from training.card.correspondence import BEGIN, END, render
 from training.card.glance import update_glance
 from training.card.tables import replace_block

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from app.contract import CORRESPONDENCE_INPUTS
-from app.inference.template import Template
+from app.inference import Template
 from training.common.fit import OtherRecipe
 from training.correspondence.net import CorrespondenceConfig, CorrespondenceNet, stencil_matrices, template_patches
 

@@ -15,10 +15,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from app.geometry.laplacian import mesh_operators
-from app.geometry.spectrum import eigenpairs
-from app.geometry.topology import face_areas
-from app.inference.template import edge_graph, faces_inside
+from app.geometry import eigenpairs, face_areas, mesh_operators
+from app.inference import edge_graph, faces_inside
 from training.data.template import PART_NAMES, Template
 
 MIN_AREA_FRACTION = 0.1

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.geometry.shapes import Mesh, PointCloud
+from app.geometry import Mesh, PointCloud
 from training.data.spectra import CLOUD, MESH, REMESHED, as_point_cloud, region_mesh, remeshed
 
 

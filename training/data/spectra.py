@@ -10,11 +10,17 @@ from dataclasses import dataclass
 import fast_simplification
 import numpy as np
 
-from app.geometry.errors import GeometryError
-from app.geometry.pipeline import SpectrumOptions, cloud_spectrum, mesh_spectrum
-from app.geometry.shapes import Mesh, PointCloud
-from app.geometry.topology import boundary_vertex_mask, drop_unreferenced
-from app.inference.template import faces_inside
+from app.geometry import (
+    GeometryError,
+    Mesh,
+    PointCloud,
+    SpectrumOptions,
+    boundary_vertex_mask,
+    cloud_spectrum,
+    drop_unreferenced,
+    mesh_spectrum,
+)
+from app.inference import faces_inside
 
 MESH, REMESHED, CLOUD = "mesh", "remeshed", "cloud"
 VARIANTS = (MESH, REMESHED, CLOUD)

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from app.geometry.topology import boundary_half_edges, boundary_loops, cap_faces
-from app.inference.template import PART_NAMES, SIDED_PARTS, Template
+from app.geometry import boundary_half_edges, boundary_loops, cap_faces
+from app.inference import PART_NAMES, SIDED_PARTS, Template
 
 TOPOLOGY = "anny-noeyes-notongue"
 SOURCE = f"anny topology {TOPOLOGY}, neutral phenotype, rest pose; mouth and eye pockets capped"

@@ -10,7 +10,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from app.inference.template import PART_NAMES, part_coverage, turned_towards
+from app.inference import PART_NAMES, part_coverage, turned_towards
 
 SERVED_LOCALIZER = "all"  # the localizer trained on every training identity, the one the service loads
 PARTS_UNITED = "parts_united"  # the served localizer on each part, the two regions united

@@ -14,8 +14,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from app.geometry.laplacian import mesh_operators
-from app.geometry.spectrum import eigenpairs
+from app.geometry import eigenpairs, mesh_operators
 from training.common.data import PairTable, SpectralData
 from training.common.fit import LoopSettings, Objective, fit, pick_device, seed_everything
 from training.localizer.masks import symmetric_scores

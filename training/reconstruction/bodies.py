@@ -20,8 +20,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
-from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
-from app.geometry.shapes import Mesh
+from app.geometry import Mesh, SpectrumOptions, mesh_spectrum
 from training.data.bodies import BodyModel, Identity
 
 BODIES_FILE = "bodies.npz"

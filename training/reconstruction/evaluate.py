@@ -23,11 +23,9 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
-from app.geometry.shapes import Mesh
-from app.inference.body import body_height, spectrum_gap, surface_area
-from app.inference.models import SpectralModels, chained_sigma
-from app.retrieval.distance import features
+from app.geometry import Mesh, SpectrumOptions, mesh_spectrum
+from app.inference import SpectralModels, body_height, chained_sigma, spectrum_gap, surface_area
+from app.retrieval import features
 from training.common.data import SpectralData
 from training.data.spectra import MESH
 from training.reconstruction.blind_spots import blind_spot_spectra

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from app.contract import RECONSTRUCTION_FILE
-from app.inference.manifest import write_manifest
+from app.inference import write_manifest
 from training.card.glance import update_glance
 from training.card.tables import replace_block
 from training.common.data import SpectralData

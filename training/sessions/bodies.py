@@ -18,15 +18,22 @@ from pathlib import Path
 import numpy as np
 
 from app.contract import BODY_FILE, INTERVAL_Z, RECONSTRUCTION_FILE
-from app.geometry.shapes import Mesh
-from app.inference.bodyfit import BodyBasis
-from app.inference.manifest import write_manifest
-from app.inference.measurements import MEASUREMENTS, Measurer
-from app.inference.models import SpectralModels
-from app.sessions.body import NoBodyFits, SessionBody, fitted_session, session_body, stored_body
-from app.sessions.fused import fused_spectrum
-from app.sessions.identity import Candidate, ranked_rows, unknown_warning
-from app.sessions.session import SessionView, session_coverage, session_union
+from app.geometry import Mesh
+from app.inference import MEASUREMENTS, BodyBasis, Measurer, SpectralModels, write_manifest
+from app.sessions import (
+    Candidate,
+    NoBodyFits,
+    SessionBody,
+    SessionView,
+    fitted_session,
+    fused_spectrum,
+    ranked_rows,
+    session_body,
+    session_coverage,
+    session_union,
+    stored_body,
+    unknown_warning,
+)
 from training.card.glance import CARD, update_glance
 from training.card.tables import replace_block
 from training.reconstruction.evaluate import closed_spectrum, rigidly_aligned

@@ -20,9 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from app.contract import INTERVAL_Z, SESSIONS_FILE
-from app.inference.manifest import write_manifest
-from app.inference.models import SpectralModels
-from app.sessions.calibration import Bands, SessionCalibration
+from app.inference import SpectralModels, write_manifest
+from app.sessions import Bands, SessionCalibration
 from training.card.glance import CARD, update_glance
 from training.card.tables import replace_block
 from training.sessions.card import BEGIN, END, render

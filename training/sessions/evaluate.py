@@ -12,9 +12,8 @@ often each served union's 90 % interval holds the truth.
 import numpy as np
 
 from app.contract import INTERVAL_Z
-from app.inference.models import SpectralModels
-from app.sessions.calibration import SessionCalibration
-from app.sessions.session import aligned_and_chained_sigma
+from app.inference import SpectralModels
+from app.sessions import SessionCalibration, aligned_and_chained_sigma
 from training.sessions.reading import Read, read_prefixes, session_views
 from training.sessions.scans import VARIANTS, relative_error, test_c_people
 

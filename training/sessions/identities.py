@@ -15,11 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from app.contract import SEED_BODIES_FILE
-from app.inference.bodyfit import BodyBasis, FittedBody
-from app.retrieval.distance import distances
-from app.retrieval.seed import AT_REST_SPREAD, SEED_FILE, seed_bodies
-from app.retrieval.store import StoredBodies
-from app.sessions.identity import shape_distances
+from app.inference import BodyBasis, FittedBody
+from app.retrieval import AT_REST_SPREAD, SEED_FILE, StoredBodies, distances, seed_bodies
+from app.sessions import shape_distances
 
 SCALES = np.geomspace(0.005, 2.0, 200)  # the τ tried
 

@@ -13,12 +13,17 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from app.inference.models import SpectralModels, UnionEstimate
-from app.sessions.aligned import AlignedUnion
-from app.sessions.fused import View
-from app.sessions.seen import SeenTemplate
-from app.sessions.session import SessionView, chained_onto_aligned, session_union, session_view
-from app.sessions.solved import solved_union
+from app.inference import SpectralModels, UnionEstimate
+from app.sessions import (
+    AlignedUnion,
+    SeenTemplate,
+    SessionView,
+    View,
+    chained_onto_aligned,
+    session_union,
+    session_view,
+    solved_union,
+)
 from training.sessions.scans import K, Person, solved_view, union_spectrum, view_meshes
 
 

@@ -12,8 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from app.geometry.pipeline import Solved, SpectrumOptions, mesh_spectrum, solve_bytes
-from app.geometry.shapes import Mesh
+from app.geometry import Mesh, Solved, SpectrumOptions, mesh_spectrum, solve_bytes
 from training.data.camera import body_mesh, close_up_camera, orbit_camera, view_mask
 from training.data.regions import RegionSampler
 from training.data.spectra import region_mesh, remeshed

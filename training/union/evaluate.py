@@ -14,8 +14,7 @@ from app.contract import (
     INTERVAL_Z,
     MASK_THRESHOLD,
 )
-from app.inference.models import chained_sigma
-from app.inference.template import localized_region
+from app.inference import chained_sigma, localized_region
 from training.common.data import PairTable, SpectralData
 from training.common.spectral_errors import spectral_errors
 from training.data.overlaps import CAMERA

@@ -18,7 +18,7 @@ from app.contract import (
     UNKNOWN_OVERLAP,
     union_feeds,
 )
-from app.inference.models import graph_inputs
+from app.inference import graph_inputs
 from training.common.onnx_export import export_graph, graph_parity, relative_difference, session
 from training.localizer.net import Localizer
 from training.union.net import UnionOperator

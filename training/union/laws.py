@@ -12,9 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
-from app.inference.models import SpectralModels
-from app.inference.template import RegionBoundaries
+from app.geometry import SpectrumOptions, mesh_spectrum
+from app.inference import RegionBoundaries, SpectralModels
 from training.common.spectral_errors import spectral_errors
 from training.data.camera import body_mesh, close_up_camera, orbit_camera, view_mask
 from training.data.pairs import NESTED_SHARE

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from app.contract import LOCALIZER_FILE, PROFILE_SHARES, UNION_FILE, UNKNOWN_BOUNDARY
-from app.inference.manifest import write_manifest
-from app.retrieval.seed import SEED_FILE
+from app.inference import write_manifest
+from app.retrieval import SEED_FILE
 from training.card.glance import update_glance
 from training.card.tables import update_card
 from training.common.data import SpectralData

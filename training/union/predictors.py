@@ -10,7 +10,7 @@ import numpy as np
 import onnxruntime as ort
 
 from app.contract import LOCALIZER_FILE, LOCALIZER_INPUTS, UNION_FILE, union_feeds
-from app.inference.models import graph_inputs, reads_boundary, reads_overlap
+from app.inference import graph_inputs, reads_boundary, reads_overlap
 from training.localizer.masks import SERVED_LOCALIZER
 from training.localizer.net import Localizer
 from training.localizer.train import probabilities

@@ -13,8 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.retrieval.distance import nearest_of
-from app.retrieval.seed import SEED_FILE
+from app.retrieval import SEED_FILE, nearest_of
 from training.common.data import PairTable, SpectralData
 from training.data.pairs import FULL_COVERAGE
 from training.data.spectra import MESH, task_spectrum
