@@ -57,8 +57,8 @@ class UnionResponse(UnionInterval):
         description="What made the union: operand (one operand, returned as is, σ 0); where every operand is an "
         "uploaded file, the uploads themselves as a scanning session reads its views: fused (declared in one "
         "frame and pose with measure_overlap=true: fused and solved once, meshes glued through their own "
-        "triangles), aligned (brought into one "
-        "frame through their places on the template, then fused) or aligned-and-chained (a few that did not "
+        "triangles), aligned (brought into one frame through their places on the template, or joined where "
+        "they were sent where they already lie on one another, then fused) or aligned-and-chained (a few that did not "
         "align chained onto the others' union); otherwise learned-chain (the learned operator folded over the "
         "operands' spectra, left to right: spectra sent without geometry, or told overlaps)."
     )

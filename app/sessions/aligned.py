@@ -6,7 +6,10 @@ together; then their union is solved as registered views' is (:mod:`app.sessions
 of chaining the learned operator, which compounds. The correspondence model has placed every
 view's points on the template, so two views' points placed near one template point are one
 surface point: those pairs give each view's motion (a trimmed least-squares fit), which the views'
-own points then refine (trimmed iterative closest points on the placed pairs' surroundings).
+own points then refine (trimmed iterative closest points on the placed pairs' surroundings). A view
+that already lies on the others where it was sent (a tracked camera's, sent without saying so) is
+refined from there too, and the motion that closes the gap more is kept: places too far off to give
+a motion (a child's, a close-up's) then cost nothing (decision 052).
 Views are joined largest first, each next the one that shares most with those joined and comes
 together with them (a view that does not yet is tried again once more views are joined). Where
 some views never do (another pose, or places too wrong), the others are fused as far as those
@@ -40,6 +43,9 @@ class Motion:
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
         return points @ self.rotation.T + self.translation
+
+
+AS_SENT = Motion(np.eye(3), np.zeros(3))
 
 
 def rigid_fit(source: np.ndarray, target: np.ndarray) -> Motion:
@@ -80,7 +86,7 @@ def joined_views(views: list[View], places: list[np.ndarray]) -> Joined:
     points' places on the template (n, 3)."""
     order = np.argsort([-float(view.mass.sum()) for view in views], kind="stable")
     own_normals = [_normals(view.points, cKDTree(view.points)) for view in views]  # turned with each view
-    moved: dict[int, Motion] = {int(order[0]): Motion(np.eye(3), np.zeros(3))}
+    moved: dict[int, Motion] = {int(order[0]): AS_SENT}
     waiting = [int(i) for i in order[1:]]
     spacing = float(np.median([_spacing(view.points) for view in views]))
     while waiting:
@@ -112,14 +118,22 @@ def aligned_views(views: list[View], places: list[np.ndarray]) -> list[View] | N
 def _motion(
     points: np.ndarray, pairs: np.ndarray, union_points: np.ndarray, tree: cKDTree, normals: np.ndarray, spacing: float
 ) -> Motion | None:
-    """The motion that brings a view's ``points`` onto the union's, from its placed ``pairs``
-    (each point's union point, −1 for none); None where too few pairs, or the gap stays wide."""
+    """The motion that brings a view's ``points`` onto the union's, refined from its placed
+    ``pairs`` (each point's union point, −1 for none) and from where it was sent, where enough
+    of it lies on the union as sent (views sent in one frame without saying so, their places a
+    few cm off, or too far off to give a motion at all): whichever closes the gap more; None
+    where neither closes it."""
+    tried = []
     matched = pairs >= 0
-    if matched.sum() < MIN_PAIRS:
-        return None
-    motion = trimmed_fit(points[matched], union_points[pairs[matched]])
-    fitted = points[matched][:: max(1, int(matched.sum()) // ICP_POINTS)]  # a spread-out subset: the cost
-    motion, residual = _refined(motion, fitted, tree, normals, spacing)
+    if matched.sum() >= MIN_PAIRS:
+        fitted = points[matched][:: max(1, int(matched.sum()) // ICP_POINTS)]  # a spread-out subset: the cost
+        placed = trimmed_fit(points[matched], union_points[pairs[matched]])
+        tried.append(_refined(placed, fitted, tree, normals, spacing))
+    sample = points[:: max(1, len(points) // ICP_POINTS)]
+    on = tree.query(sample)[0] <= OVERLAP_GAP * spacing
+    if on.sum() >= MIN_PAIRS:
+        tried.append(_refined(AS_SENT, sample[on], tree, normals, spacing))
+    motion, residual = min(tried, key=lambda fit: fit[1], default=(None, np.inf))
     return motion if residual <= MAX_RESIDUAL * spacing else None
 
 

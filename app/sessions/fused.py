@@ -9,21 +9,23 @@ grouping of the views gives one union), with the Dirichlet boundary where a view
 other view goes on, and its spectrum is solved once: on the views' own triangles glued together
 where every view is a mesh, else as an uploaded point cloud is.
 
-What decides the answer is the union's boundary. A view's boundary point is inside the union
-where another view's inside is within reach (the local spacing of either view, at least
-:data:`MIN_TOLERANCE_M`); where two views stop side by side facing each other, the gap between
-them is a seam, not a boundary; where both stop at one place on the same side (a re-scan), the
-union stops there too. The points left on the boundary are joined into loops (along each view's
-boundary edges, and across views where their loose ends meet); a closed loop no longer than
-:data:`~app.contract.MAX_HOLE_EDGES` boundary edges is a pin-hole between views and is capped
-(its points freed, a point at its centre added), as the spectrum definition caps a mesh's
-pin-holes: without it, the gaps views leave between them pin a nearly closed union to zero and
-every eigenvalue comes out too high. A few boundary points that make no curve with any other
-are freed for the same reason. What the views' geometry cannot tell (whether a seam a face wide
-between two views is covered), another reading can (``inside``: :mod:`app.sessions.seen`). These
-rules, not the glued Laplacian, are what a registered session's error is left in; the readings
-tried in their place are measured in ``docs/decisions/046-the-fused-boundary-stays-rule-based.md``
-and ``050-a-session-boundary-is-not-decided-by-loops-or-thresholds.md``.
+What decides the answer is the union's boundary. A view's boundary point is inside the union where
+another view's inside is within reach (the local spacing of either view, at least
+:data:`~app.sessions.pairs.MIN_TOLERANCE_M`); where two views stop side by side facing each other,
+the gap between them is a seam, not a boundary; where both stop at one place on the same side (a
+re-scan), the union stops there too. A point finds another view's only on its own stretch of the
+body, not across a gap where the body nearly touches itself (:mod:`app.sessions.pairs`). The points
+left on the boundary are joined into loops (along each view's boundary edges, and across views
+where their loose ends meet); a closed loop no longer than :data:`~app.contract.MAX_HOLE_EDGES`
+boundary edges is a pin-hole between views and is capped (its points freed, a point at its centre
+added), as the spectrum definition caps a mesh's pin-holes: without it, the gaps views leave
+between them pin a nearly closed union to zero and every eigenvalue comes out too high. A few
+boundary points that make no curve with any other are freed for the same reason. What the views'
+geometry cannot tell (whether a seam a face wide between two views is covered), another reading can
+(``inside``: :mod:`app.sessions.seen`). These rules, not the glued Laplacian, are what a registered
+session's error is left in; the readings tried in their place are measured in
+``docs/decisions/046-the-fused-boundary-stays-rule-based.md`` and
+``050-a-session-boundary-is-not-decided-by-loops-or-thresholds.md``.
 
 A view whose every point lies on another view adds nothing and goes first (a re-scan, a close-up,
 a part sent with its re-meshed copy: the union is the other view, exactly). Where every view is
@@ -44,12 +46,11 @@ from app.geometry.pipeline import SpectrumOptions, cloud_spectrum
 from app.geometry.placing import Part
 from app.geometry.shapes import PointCloud
 from app.geometry.topology import boundary_half_edges
+from app.sessions.pairs import Pair, every_pair, ordered_pairs
 from app.sessions.seams import Seams, cap_fans, glued_spectrum, welded_faces
 
-MIN_TOLERANCE_M = 0.003  # a few mm: one scanner's registered views rarely agree better
 BRIDGE = 0.9  # of the coarser local spacing: two views' loose ends this near, facing, are one seam
 INWARD_NEIGHBOURS = 8  # a boundary point's own neighbours that say which way its view lies
-DUPLICATE = 0.5  # of the finer local spacing: a later view's point this near an earlier one's is the same point
 MEET = 2.0  # of the coarser local spacing: two views' loose ends this near are one stretch of a loop
 FARTHEST = max(1.0, BRIDGE, MEET)  # the farthest any rule looks
 FRAGMENT_POINTS = 4  # boundary points fewer than this, joined to no other, are no boundary
@@ -96,63 +97,19 @@ class FusedCloud:
 InsideRule = Callable[[list["View"], list[np.ndarray], FusedCloud], np.ndarray]
 
 
-def _reach(tree: cKDTree) -> np.ndarray:
-    """(n,) how far each point's own neighbours lie (its second nearest): the view's local
-    spacing, fine on a face or a hand, coarse on the back."""
-    if tree.n < 3:
-        return np.full(tree.n, MIN_TOLERANCE_M)
-    distance, _ = tree.query(tree.data, k=3)
-    return np.maximum(distance[:, 2], MIN_TOLERANCE_M)
-
-
-@dataclass(frozen=True)
-class _Pair:
-    """Where each point of one view finds its nearest point of another, up to the farthest any
-    rule here looks (FARTHEST times the coarser spacing): one k-d tree query per ordered pair,
-    which every rule reads at its own scale."""
-
-    distance: np.ndarray
-    nearest: np.ndarray  # 0 where none within reach
-    reach: np.ndarray  # the view's own local spacing at each point
-    other_reach: np.ndarray  # the other view's at each point's nearest
-
-    @classmethod
-    def of(cls, view: View, reach: np.ndarray, tree: cKDTree, other_reach: np.ndarray) -> "_Pair":
-        bound = FARTHEST * max(float(reach.max(initial=0.0)), float(other_reach.max(initial=0.0)))
-        distance, nearest = tree.query(view.points, distance_upper_bound=bound)
-        nearest = np.where(np.isfinite(distance), nearest, 0)
-        return cls(distance, nearest, reach, other_reach[nearest])
-
-    def near(self, scale: float = 1.0, nearer: bool = False) -> np.ndarray:
-        """Which points lie on the other view: its nearest point within either's local spacing
-        (with ``nearer`` the smaller of the two), times ``scale`` (at most FARTHEST)."""
-        pick = np.minimum if nearer else np.maximum
-        return self.distance <= scale * pick(self.reach, self.other_reach)
-
-    def inside(self, other: View) -> np.ndarray:
-        """Which points lie on the ``other`` view's inside: near one of its points that is not
-        on its boundary."""
-        return self.near() & ~other.boundary[self.nearest]
-
-    def repeated(self) -> np.ndarray:
-        """Which points are one of the other view's points again (within DUPLICATE of the finer
-        spacing)."""
-        return self.near(DUPLICATE, nearer=True)
-
-
 def fused_cloud(views: list[View]) -> FusedCloud:
     """The union of ``views`` (one frame): each surface point once (the larger view's where two
     cover it), its boundary where a view stops and no other's inside goes on, the pin-holes
     between views capped; a view another holds whole left out first. Costs a k-d tree query per
     pair of views."""
     trees = [cKDTree(view.points) for view in views]
-    every = _every_pair(views, trees)
+    every = every_pair(views, trees, FARTHEST)
     gone = covered_views(views, every)
     order = [i for i in canonical_order(views) if i not in gone]
     if len(order) == 1:  # one view is its own union: its points, boundary and triangles as solved
         (alone,) = (views[i] for i in order)
         return FusedCloud(alone.points, alone.boundary.copy(), 0, alone.faces)
-    pairs = {(a, b): every[order[a], order[b]] for a, b in _ordered_pairs(len(order))}
+    pairs = {(a, b): every[order[a], order[b]] for a, b in ordered_pairs(len(order))}
     views, trees = [views[i] for i in order], [trees[i] for i in order]
     kept, under, loose = _overlapped(views, pairs)
     seamed = _bridge(views, trees, pairs, loose)
@@ -169,19 +126,8 @@ def fused_cloud(views: list[View]) -> FusedCloud:
     return FusedCloud(cloud, _without_fragments(cloud, flags), len(centres), faces, len(views))
 
 
-def _ordered_pairs(count: int) -> list[tuple[int, int]]:
-    """Every ordered pair of ``count`` views."""
-    return [(i, j) for i in range(count) for j in range(count) if i != j]
-
-
-def _every_pair(views: list[View], trees: list[cKDTree]) -> dict[tuple[int, int], "_Pair"]:
-    """Where each view's points find the others' (``trees``: each view's k-d tree)."""
-    reaches = [_reach(tree) for tree in trees]
-    return {(i, j): _Pair.of(views[i], reaches[i], trees[j], reaches[j]) for i, j in _ordered_pairs(len(views))}
-
-
 def _overlapped(
-    views: list[View], pairs: dict[tuple[int, int], "_Pair"]
+    views: list[View], pairs: dict[tuple[int, int], Pair]
 ) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
     """Per view (in canonical order): which points the union keeps (not on an earlier view's
     inside, nor one of its points again), which lie on an earlier view's inside, and which
@@ -198,7 +144,7 @@ def _overlapped(
     return kept, under, loose
 
 
-def covered_views(views: list[View], pairs: dict[tuple[int, int], _Pair]) -> set[int]:
+def covered_views(views: list[View], pairs: dict[tuple[int, int], Pair]) -> set[int]:
     """The views another view holds whole (all but COVERED_SHARE of their area on its inside or
     on its boundary points themselves), which add nothing to the union. Of views that hold each
     other (a part and its re-meshed copy) the one with more points stays: the finer mesh."""
@@ -258,7 +204,7 @@ def _inward(view: View, tree: cKDTree, points: np.ndarray) -> np.ndarray:
 
 
 def _bridge(
-    views: list[View], trees: list[cKDTree], pairs: dict[tuple[int, int], _Pair], loose: list[np.ndarray]
+    views: list[View], trees: list[cKDTree], pairs: dict[tuple[int, int], Pair], loose: list[np.ndarray]
 ) -> list[np.ndarray]:
     """Two views that stop side by side, facing each other across less than a spacing, join
     there (the gap between them is a seam, not a boundary): their loose points that meet a loose
@@ -294,7 +240,7 @@ def canonical_order(views: list[View]) -> list[int]:
 
 
 def _pinholes(
-    views: list[View], pairs: dict[tuple[int, int], _Pair], loose: list[np.ndarray], kept: list[np.ndarray]
+    views: list[View], pairs: dict[tuple[int, int], Pair], loose: list[np.ndarray], kept: list[np.ndarray]
 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Which loose boundary points lie on a pin-hole between views (a closed loop of at most
     MAX_HOLE_EDGES of the views' boundary edges, each stretch counted once: by the points the

@@ -27,6 +27,16 @@ def scans():
 
 
 @pytest.fixture(scope="module")
+def scans_apart(scans):
+    """The two patches, the second in a frame of its own (a metre off): neither lies on the
+    other as sent, and their places (no body part: doubted) join nothing, so their union is the
+    learned chain's."""
+    moved = bumpy_patch(seed=2, n=500)
+    moved = type(moved)(moved.vertices + [1.0, 0.0, 0.0], moved.faces)
+    return [scans[0], ("patch2.ply", mesh_bytes(moved, "ply"))]
+
+
+@pytest.fixture(scope="module")
 def body_scans():
     """Two parts of the template body (a patch is no body part: its places are doubted, its
     region counts nothing and gets no token), as (file name, bytes)."""
@@ -42,11 +52,13 @@ def test_a_spectrum_is_the_pipelines(service):
     assert report.boundary == "dirichlet" and report.faces_dropped == 0
 
 
-def test_a_union_of_files_equals_the_union_of_their_spectra_in_either_order(service, scans):
-    """Files are united told the overlap their places on the template measure (none for these
-    bumpy patches, no body part: their places are doubted); their spectra told the same, in
-    either order, give the same union."""
+def test_a_union_of_files_equals_the_union_of_their_spectra_in_either_order(service, scans_apart):
+    """Files that do not come together are united told the overlap their places on the template
+    measure (none for these bumpy patches, no body part: their places are doubted); their spectra
+    told the same, in either order, give the same union."""
+    scans = scans_apart
     by_files = service.union(files=scans)
+    assert by_files.union_by == "learned-chain"
     spectra = [operand.eigenvalues for operand in by_files.operands]
     told = {"overlap": by_files.overlaps or None, "boundary": by_files.boundaries or None}
     by_spectra = service.union(spectra=spectra[::-1], **told)
@@ -66,6 +78,8 @@ def test_registered_views_sent_one_by_one_are_told_the_overlap_their_uploads_mea
     measured = service.overlap([view.footprint for view in views])
     together = service.union(files=scans, measure_overlap=True)
     assert together.union_by == "fused" and together.overlaps_told == [False]  # fused, told to no operator
+    as_sent = service.union(files=scans)  # not said to share a frame: they lie on one another as sent
+    assert as_sent.union_by == "aligned"
     assert measured.overlaps == pytest.approx(together.overlaps, abs=0.01)
     assert measured.boundaries == pytest.approx(together.boundaries, abs=0.02)
     spectra = [view.eigenvalues for view in views]
@@ -160,9 +174,10 @@ def test_scans_placed_once_are_united_as_spectra_with_their_regions(service, bod
     np.testing.assert_allclose(by_tokens.eigenvalues, by_spectra.eigenvalues, rtol=1e-6)
 
 
-def test_a_session_filled_view_by_view_answers_as_the_union_of_its_views(service, scans):
+def test_a_session_filled_view_by_view_answers_as_the_union_of_its_views(service, scans_apart):
     """The client's sessions: views added one by one to a session answer what one union of
     all of them answers, as the session reads back, until the session is ended."""
+    scans = scans_apart
     session = service.new_session()
     assert session.union_by == "empty" and not session.views
     for scan in scans:

@@ -122,3 +122,21 @@ def test_views_that_share_nothing_are_not_aligned():
     far = replace(views[2], points=views[2].points * 3.0)
     sent, _ = moved([views[0], far], seed=6)
     assert aligned_views(sent, [places[0], places[0][: len(far.points)]]) is None
+
+
+def scrambled(places: list[np.ndarray], seed: int) -> list[np.ndarray]:
+    """Each view's places shuffled among its points: places no fit can bring together."""
+    rng = np.random.default_rng(seed)
+    return [place[rng.permutation(len(place))] for place in places]
+
+
+def test_views_sent_in_one_frame_are_joined_as_sent_where_their_places_cannot_join_them():
+    """A front-end that tracks its camera but does not say so: the views already lie on one
+    another, and where their places are too far off to give the motion (a child's, a close-up's),
+    they are joined exactly where they were sent."""
+    views, places = three_views()
+    wrong = scrambled(places, seed=7)
+    back = aligned_views(views, wrong)
+    assert back is not None
+    for original, joined in zip(views, back, strict=True):
+        np.testing.assert_allclose(joined.points, original.points, atol=1e-9)

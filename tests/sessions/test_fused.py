@@ -210,3 +210,48 @@ def test_closed_views_make_a_closed_union():
     spectrum = fused_spectrum([north, south], K, [north.points, south.points], not_asked)
     assert spectrum[0] == pytest.approx(0.0, abs=1e-6)
     np.testing.assert_allclose(spectrum[1:4], 2.0, rtol=0.03)
+
+
+def sheet(x0: float, y0: float, width: float, height: float, step: float, z: float = 0.0, up: bool = True) -> Mesh:
+    """A flat rectangle at height ``z`` meshed at ``step``, its normal up (+z) or down."""
+    mesh = grid(width, height, round(width / step), round(height / step))
+    faces = mesh.faces if up else mesh.faces[:, ::-1]
+    return Mesh(mesh.vertices + [x0, y0, z], faces)
+
+
+def one_view(*meshes: Mesh) -> View:
+    """One scan holding ``meshes`` as its pieces."""
+    points = np.concatenate([mesh.vertices for mesh in meshes])
+    offsets = np.cumsum([0] + [len(mesh.vertices) for mesh in meshes[:-1]])
+    faces = np.concatenate([mesh.faces + offset for mesh, offset in zip(meshes, offsets, strict=True)])
+    operators = mesh_operators(points, faces)
+    return view_of(points, operators.mass.diagonal(), boundary_vertex_mask(faces, len(points)), faces)
+
+
+@pytest.mark.parametrize("facing", ["towards", "away"])
+def test_a_stretch_across_a_gap_facing_the_other_view_is_another_surface(facing):
+    """Where the body nearly touches itself (an inner thigh against the other), a view reaches
+    over another's points 2 mm away, finer than their spacing. Facing them (normals apart) it
+    is another stretch of the body: the union is the first view and that stretch, apart (their
+    spectra merged). Facing the same way it is the same surface seen again (a re-scan's noise):
+    the union is the first view. The rest of the second view lies on the first, as seen."""
+    step = 0.004
+    first = one_view(sheet(0.0, 0.0, 0.2, 0.1, step))
+    seen_again = sheet(0.1, 0.0, 0.1, 0.1, step)
+    across = sheet(0.01, 0.01, 0.08, 0.08, step, z=0.002, up=facing == "away")
+    union = fused_spectrum([first, one_view(seen_again, across)], K)
+    if facing == "towards":
+        expected = np.sort(np.concatenate([rectangle_spectrum(0.2, 0.1), rectangle_spectrum(0.08, 0.08)]))[:K]
+    else:
+        expected = rectangle_spectrum(0.2, 0.1)
+    assert relative(union, expected) < 0.03
+
+
+def test_a_view_wound_the_other_way_round_is_the_same_surface():
+    """A scan whose triangles are wound the other way (another tool's convention) turns every
+    normal round: it lies on the same surface all the same, and adds nothing where it is inside
+    the other view."""
+    step = 0.004
+    first = one_view(sheet(0.0, 0.0, 0.2, 0.1, step))
+    rewound = one_view(sheet(0.1, 0.0, 0.1, 0.1, step, z=0.001, up=False))
+    assert relative(fused_spectrum([first, rewound], K), rectangle_spectrum(0.2, 0.1)) < 0.03
