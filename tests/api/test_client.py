@@ -8,6 +8,7 @@ import trimesh
 from app.client import Client, ServiceProblem
 from app.core.config import Settings
 from app.geometry.pipeline import SpectrumOptions, mesh_spectrum
+from app.geometry.shapes import Mesh
 from app.inference.template import Template
 from app.samples import PARTS, template_part
 from harness.builders import mesh_bytes
@@ -31,8 +32,8 @@ def scans_apart(scans):
     """The two patches, the second in a frame of its own (a metre off): neither lies on the
     other as sent, and their places (no body part: doubted) join nothing, so their union is the
     learned chain's."""
-    moved = bumpy_patch(seed=2, n=500)
-    moved = type(moved)(moved.vertices + [1.0, 0.0, 0.0], moved.faces)
+    patch = bumpy_patch(seed=2, n=500)
+    moved = Mesh(patch.vertices + [1.0, 0.0, 0.0], patch.faces)
     return [scans[0], ("patch2.ply", mesh_bytes(moved, "ply"))]
 
 

@@ -210,9 +210,9 @@ async def retrieve(
     fitted to the uploads, or through its rebuilt body; two operands whose overlap is not told by their share
     profile)."""
     models = union.models
-    # An open query, or a union glued from several uploads (which errs where the body nearly
-    # touches itself: decision 050), is ranked by the body fitted to where its uploads lie; one
-    # closed scan, or one capped, is ranked by its own spectrum.
+    # An open query, or a union glued from several uploads (whose person the fitted body finds
+    # first more often than the glued union's spectrum does: decision 049), is ranked by the body
+    # fitted to where its uploads lie; one closed scan, or one capped, by its own spectrum.
     outcome = await union.solved(cap_holes=cap_holes, locate=models.body is not None and not cap_holes)
     fit = UploadsFit()
     if rebuild and (open_surface(outcome.result.eigenvalues) or len(outcome.operands) > 1):
