@@ -192,6 +192,22 @@ def train_correspondence_command(
     typer.echo(json.dumps(metrics["pairs"], indent=1))
 
 
+@cli.command("evaluate-correspondence")
+def evaluate_correspondence_command(
+    parts: Annotated[Path, typer.Option(help="A `build-parts` directory.")] = Path("data/parts-standard"),
+    models: ModelsOption = Path("models"),
+) -> None:
+    """Re-score the served correspondence graph without training it (after a change to how parts
+    are placed): its thresholds, parts, pairs and cost, and its card section."""
+    import json
+
+    from training.correspondence.pipeline import reevaluate_correspondence
+
+    command = f"spectral-unions-train evaluate-correspondence --parts {parts} --models {models}"
+    metrics = reevaluate_correspondence(parts, models, command)
+    typer.echo(json.dumps(metrics["pairs"], indent=1))
+
+
 @cli.command("calibrate-sessions")
 def calibrate_sessions_command(
     models: ModelsOption = Path("models"),

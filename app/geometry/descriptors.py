@@ -34,7 +34,7 @@ from app.geometry.tangent import (
 from app.geometry.topology import boundary_vertex_mask
 
 FEATURES = len(HKS_TIMES) + 2  # the HKS at each time, the mean curvature, the boundary flag
-BOUNDARY_COLUMN = FEATURES - 1
+BEND_COLUMN, BOUNDARY_COLUMN = FEATURES - 2, FEATURES - 1
 CURVATURE_SCALE_M = 0.05  # mean curvature read as asinh(H · 5 cm): ~linear up to a wrist's bend, a finger's ~2
 
 
@@ -102,13 +102,37 @@ def _inputs(
     values, basis = eigenpairs(operators, k, None, vectors=True)
     values = np.maximum(values, 0.0)
     bend = np.arcsinh(curvature * CURVATURE_SCALE_M)
-    features = np.column_stack([heat_signature(values, basis), bend, boundary.astype(np.float64)])
+    features = np.column_stack([heat_signature(values, basis), bend, boundary.astype(np.float64)])  # BEND_COLUMN
     return PartInputs(
         features.astype(np.float32),
         operators.mass.diagonal().astype(np.float32),
         basis.astype(np.float32),
         values.astype(np.float32),
         stencil,
+    )
+
+
+def magnified(inputs: PartInputs, scale: float) -> PartInputs:
+    """``inputs`` as the same part ``scale`` times larger gives them, without a new solve: the
+    eigenvalues go as 1/scale², the M-orthonormal basis as 1/scale, the mass as scale², the mean
+    curvature and the gradient weights as 1/scale, and the heat kernel signature is re-read at
+    the same times (the placing reads a child's part as an adult-sized one:
+    :class:`app.inference.correspondence.PlacingGraph`)."""
+    values = inputs.eigenvalues.astype(np.float64) / scale**2
+    basis = inputs.basis.astype(np.float64) / scale
+    curvature = np.sinh(inputs.features[:, BEND_COLUMN].astype(np.float64)) / CURVATURE_SCALE_M / scale
+    features = np.column_stack(
+        [heat_signature(values, basis), np.arcsinh(curvature * CURVATURE_SCALE_M), inputs.features[:, BOUNDARY_COLUMN]]
+    )
+    stencil = GradientStencil(inputs.stencil.neighbours, (inputs.stencil.weights / scale).astype(np.float32))
+    return replace(
+        inputs,
+        features=features.astype(np.float32),
+        mass=(inputs.mass.astype(np.float64) * scale**2).astype(np.float32),
+        basis=basis.astype(np.float32),
+        eigenvalues=values.astype(np.float32),
+        stencil=stencil,
+        points=None if inputs.points is None else inputs.points * scale,
     )
 
 
@@ -138,3 +162,4 @@ class Places:
     position: np.ndarray  # (n, 3) float32, rest-pose template coordinates, metres
     confidence: np.ndarray  # (n,) float32
     graph_ms: float
+    magnification: float = 1.0  # how much larger the graph read the part: what placed it surest

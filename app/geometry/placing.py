@@ -17,7 +17,7 @@ placed itself. Everything else a client gets (the part's vertices, area, boundar
 the part's own.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import fast_simplification
 import numpy as np
@@ -57,7 +57,7 @@ class Part:
         """The graph's places of ``inputs`` as the places of the part's own vertices."""
         if self.source is None:
             return places
-        return Places(places.position[self.source], places.confidence[self.source], places.graph_ms)
+        return replace(places, position=places.position[self.source], confidence=places.confidence[self.source])
 
 
 def mesh_part(vertices: np.ndarray, faces: np.ndarray, operators: Operators, most: int = PLACED_VERTICES) -> Part:

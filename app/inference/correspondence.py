@@ -18,7 +18,7 @@ from scipy.sparse.linalg import splu
 from scipy.spatial import cKDTree
 
 from app.contract import CORRESPONDENCE_INPUTS
-from app.geometry.descriptors import FEATURES, Places
+from app.geometry.descriptors import FEATURES, PartInputs, Places, magnified
 from app.geometry.laplacian import Operators
 from app.geometry.placing import Part
 from app.inference.cover import Cover
@@ -66,9 +66,10 @@ TELL_BELOW_KEY = "tell_overlap_below"
 # capsule) are placed with a fraction of a body part's.
 UNCERTAIN_BELOW_KEY = "uncertain_below_confidence"
 # A body part's places keep its area: carried to the template, it covers a region of about its
-# own area over the person's scale squared (a 2.4 m adult would be at half of it). A shape that
-# is no body part can be placed confidently and still crowd its places onto a spot (a small
-# closed ball). Below this share its places are doubted whatever their confidence
+# own area over the person's scale squared (a 2.4 m adult would be at half of it), the area the
+# network read it at (magnified) for a smaller person. A shape that is no body part can be
+# placed confidently and still crowd its places onto a spot (a small closed ball). Below this
+# share its places are doubted whatever their confidence
 # (docs/decisions/040-a-part-whose-places-crowd-is-no-body-part.md).
 CROWDED_BELOW = 0.5
 
@@ -82,6 +83,7 @@ class Placement:
     vertex: np.ndarray  # (n,) the template vertex nearest to its position
     area: np.ndarray  # (n,) the part's own area at each vertex, m²
     boundary: np.ndarray  # (n,) bool: its boundary vertices
+    magnification: float = 1.0  # how much larger the network read it (Places.magnification)
 
     @property
     def mean_confidence(self) -> float:
@@ -185,10 +187,24 @@ class TemplateRegions:
         return overlaps, boundaries
 
 
+# The network learnt adults (the training identities are men and women): a child's part, two
+# thirds of an adult's size, reads as another part of a bigger body and is placed 10-40 cm off.
+# Read magnified to an adult's size it is placed as well as an adult's, and the network's own
+# mean confidence peaks at that magnification (anny calibration people, men, women and
+# children: docs/decisions/053-a-part-is-placed-at-the-size-the-network-knows.md). The graph
+# climbs a ladder of magnifications MAGNIFICATION_STEP apart from 1 toward the more confident
+# side while the confidence rises, leaving 1 only for a gain above LEAVE_MARGIN (an adult's part
+# is read as sent), between MAGNIFICATION_STEPS' ends: 0.76 (a tall adult) to 2.0 (a toddler).
+MAGNIFICATION_STEP = 1.15
+MAGNIFICATION_STEPS = (-2, 5)
+LEAVE_MARGIN = 0.02
+
+
 class PlacingGraph:
-    """The ONNX correspondence graph alone: a part's inputs → each vertex's place and confidence.
-    What a solver worker runs (:func:`places_in_worker`), so that the graph's memory and time
-    fall under the worker's cap and deadline, not the API process's."""
+    """The ONNX correspondence graph alone: a part's inputs → each vertex's place and confidence,
+    read at the magnification that places it surest. What a solver worker runs
+    (:func:`places_in_worker`), so that the graph's memory and time fall under the worker's cap
+    and deadline, not the API process's."""
 
     def __init__(self, path: Path, threads: int = 1) -> None:
         options = ort.SessionOptions()
@@ -208,17 +224,45 @@ class PlacingGraph:
 
     def run(self, part: Part, relaxed: bool = False) -> Places:
         """The places of the part's own vertices: the graph run on what it reads of the part (the
-        part, or its collapsed copy), its places (``relaxed``: relaxed toward that part's edge
-        lengths, :mod:`app.inference.relaxation`) handed to the part's vertices."""
+        part, or its collapsed copy) at the magnification that places it surest, its places
+        (``relaxed``: relaxed toward that part's edge lengths as magnified,
+        :mod:`app.inference.relaxation`) handed to the part's vertices."""
         started = time.perf_counter()
-        position, confidence = self.session.run(None, part.inputs.feeds())
-        if not (np.isfinite(position).all() and np.isfinite(confidence).all()):
-            raise ValueError("the correspondence graph returned non-finite places")
+        step, inputs, position, confidence = self._surest(part.inputs)
         graph_ms = (time.perf_counter() - started) * 1e3
         if relaxed:
-            inputs = part.inputs
             position = relaxed_places(position, confidence, inputs.points, part_edges(inputs))
-        return part.expand(Places(position, confidence, graph_ms))
+        return part.expand(Places(position, confidence, graph_ms, MAGNIFICATION_STEP**step))
+
+    def _surest(self, inputs: PartInputs) -> tuple[int, PartInputs, np.ndarray, np.ndarray]:
+        """The step of the magnification the climb settles on (see :data:`MAGNIFICATION_STEP`),
+        the inputs magnified so, and the graph's places and confidences there."""
+        tried: dict[int, tuple[PartInputs, np.ndarray, np.ndarray, float]] = {}
+
+        def at(step: int) -> tuple[PartInputs, np.ndarray, np.ndarray, float]:
+            if step not in tried:
+                read = inputs if step == 0 else magnified(inputs, MAGNIFICATION_STEP**step)
+                position, confidence = self._graph(read)
+                tried[step] = (read, position, confidence, float(confidence @ read.mass) / float(read.mass.sum()))
+            return tried[step]
+
+        lowest, highest = MAGNIFICATION_STEPS
+        for direction in (1, -1):
+            step = 0
+            while lowest <= step + direction <= highest:
+                margin = LEAVE_MARGIN if step == 0 else 0.0
+                if at(step + direction)[3] <= at(step)[3] + margin:
+                    break
+                step += direction
+            if step:
+                return (step, *at(step)[:3])
+        return (0, *at(0)[:3])
+
+    def _graph(self, inputs: PartInputs) -> tuple[np.ndarray, np.ndarray]:
+        position, confidence = self.session.run(None, inputs.feeds())
+        if not (np.isfinite(position).all() and np.isfinite(confidence).all()):
+            raise ValueError("the correspondence graph returned non-finite places")
+        return position, confidence
 
 
 _WORKER_GRAPHS: dict[str, PlacingGraph] = {}
@@ -253,7 +297,8 @@ class CorrespondenceModel:
         position = places.position.astype(np.float64)
         nearest = self.regions.nearest(position)
         confidence = places.confidence.astype(np.float64)
-        return Placement(position, confidence, nearest, part.mass.astype(np.float64), part.boundary)
+        area = part.mass.astype(np.float64)
+        return Placement(position, confidence, nearest, area, part.boundary, places.magnification)
 
     def doubts(self, placement: Placement, cover: Cover) -> list[str]:
         """A warning where the part's places cannot be trusted: too uncertain (see
@@ -266,7 +311,8 @@ class CorrespondenceModel:
                 f"its places on the template are uncertain (mean confidence {confidence:.2f}, below {below:.2f}, "
                 "where few body parts are placed): not part of a human body, or a view the model cannot place"
             )
-        kept = float(self.regions.vertex_area[cover.region].sum()) / float(placement.area.sum())
+        read_area = float(placement.area.sum()) * placement.magnification**2  # the area the network placed
+        kept = float(self.regions.vertex_area[cover.region].sum()) / read_area
         if kept < CROWDED_BELOW:
             found.append(
                 f"its places crowd onto a template region of {100 * kept:.0f} % of its own area (a body part's "

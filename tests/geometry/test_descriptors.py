@@ -5,7 +5,7 @@ from scipy.spatial import Delaunay
 from scipy.spatial.transform import Rotation
 
 from app.contract import CORRESPONDENCE_INPUTS, HKS_TIMES
-from app.geometry.descriptors import CURVATURE_SCALE_M, FEATURES, cloud_inputs, mesh_inputs
+from app.geometry.descriptors import CURVATURE_SCALE_M, FEATURES, cloud_inputs, magnified, mesh_inputs
 from app.geometry.topology import boundary_vertex_mask
 from tests.conftest import bumpy_patch, sphere
 
@@ -20,6 +20,21 @@ def test_inputs_do_not_depend_on_frame_or_winding(patch):
     np.testing.assert_allclose(moved.eigenvalues, reference.eigenvalues, rtol=1e-4)
     np.testing.assert_allclose(moved.mass, reference.mass, rtol=1e-5)
     np.testing.assert_array_equal(moved.stencil.neighbours, reference.stencil.neighbours)
+
+
+def test_magnified_inputs_are_those_of_the_part_made_larger(patch):
+    """Read magnified 1.5 times, a part's inputs are what the engine computes on the part scaled
+    by 1.5 (a new solve): the same heat signature, curvature, mass, eigenvalues and gradient
+    weights, and a basis spanning the same functions (each eigenvector up to its sign)."""
+    scaled = mesh_inputs(1.5 * patch.vertices, patch.faces)
+    read = magnified(mesh_inputs(patch.vertices, patch.faces), 1.5)
+    np.testing.assert_allclose(read.features, scaled.features, atol=1e-4)
+    np.testing.assert_allclose(read.eigenvalues, scaled.eigenvalues, rtol=1e-4)
+    np.testing.assert_allclose(read.mass, scaled.mass, rtol=1e-5)
+    np.testing.assert_allclose(read.stencil.weights, scaled.stencil.weights, rtol=1e-3, atol=1e-3)
+    np.testing.assert_allclose(read.points, scaled.points, rtol=1e-6)
+    overlap = np.abs(np.einsum("nk,n,nk->k", read.basis, read.mass, scaled.basis))
+    assert overlap[:20].min() > 0.999
 
 
 def test_boundary_flag_and_heat_signature_of_a_closed_surface():

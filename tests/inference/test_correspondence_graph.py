@@ -62,6 +62,27 @@ def test_a_template_part_lands_near_itself_mesh_or_cloud(models):
     assert region.part_coverage["torso"] > 0.7 and region.part_coverage["head"] < 0.2
 
 
+def test_a_part_of_a_smaller_body_is_placed_where_it_lies(models, monkeypatch):
+    """The torso, hips and thighs cut from the template and shrunk to a child's size (0.65: the
+    network learnt adults only): read as sent, their places fall elsewhere; read at the
+    magnification the graph is surest at, they land as the adult-sized part does (most within
+    10 cm of themselves), the graph says how much it magnified, and an adult-sized part is read
+    as sent."""
+    vertices, faces, index = _template_part(models, ["torso", "hips", "left_thigh", "right_thigh"])
+    truth = models.template.vertices[index]
+    graph = models.correspondence.graph
+    adult = graph.run(Part.itself(mesh_inputs(vertices, faces)))
+    child = graph.run(Part.itself(mesh_inputs(0.65 * vertices, faces)))
+    assert adult.magnification == 1.0
+    assert 1.3 < child.magnification < 1.8
+    near = [np.mean(np.linalg.norm(places.position - truth, axis=1) < 0.10) for places in (adult, child)]
+    assert near[1] > 0.8 and near[1] > near[0] - 0.1
+    monkeypatch.setattr("app.inference.correspondence.MAGNIFICATION_STEPS", (0, 0))
+    as_sent = graph.run(Part.itself(mesh_inputs(0.65 * vertices, faces)))
+    assert as_sent.magnification == 1.0
+    assert np.mean(np.linalg.norm(as_sent.position - truth, axis=1) < 0.10) < near[1] - 0.2
+
+
 def test_a_graph_trained_on_other_features_is_refused(monkeypatch):
     """The engine computing one feature more than the graph was trained on (a model file older
     than the code): the graph is refused at load, not fed columns it would misread."""

@@ -35,22 +35,45 @@ def run_correspondence_pipeline(
     checks = load_parts(parts_dir, "test_c")[:4]
     export_correspondence(model, checks[0], graph)
     write_manifest(models)
-    pairs = evaluate_pairs(parts_dir, graph, models)
-    set_thresholds(graph, pairs["tell_below"], pairs["nested_below"], pairs["uncertain_below"])
-    write_manifest(models)
-    metrics = {
-        "parts": evaluate_correspondence(parts_dir, graph, models),
-        "pairs": pairs,
+    metrics = served_figures(parts_dir, models) | {
         "parity_max_relative": correspondence_parity(model, graph, checks),
-        "cost": part_cost(graph, models),
         "training": checkpoint["training"] | {"seconds": round(checkpoint["seconds"], 1)},
         "build": json.loads((parts_dir / "parts.json").read_text()),
         "seconds": {"training": round(trained - started, 1), "total": round(time.perf_counter() - started, 1)},
     }
+    write_figures(models, metrics, command)
+    return metrics
+
+
+def reevaluate_correspondence(parts_dir: Path, models: Path, command: str) -> dict:
+    """The served graph's figures again without training it, after a change to how parts are
+    placed: its thresholds re-chosen and every part, pair and cost re-scored on ``parts_dir``'s
+    test and validation draws (which a build draws the same with or without its training parts);
+    what the training recorded (recipe, parity, build, time) stays."""
+    metrics = json.loads((models / METRICS_FILE).read_text()) | served_figures(parts_dir, models)
+    write_figures(models, metrics, command)
+    return metrics
+
+
+def served_figures(parts_dir: Path, models: Path) -> dict:
+    """The served graph's thresholds chosen on the validation pairs and written into it, then
+    its parts, pairs and placing cost scored."""
+    graph = models / CORRESPONDENCE_FILE
+    pairs = evaluate_pairs(parts_dir, graph, models)
+    set_thresholds(graph, pairs["tell_below"], pairs["nested_below"], pairs["uncertain_below"])
+    write_manifest(models)
+    return {
+        "parts": evaluate_correspondence(parts_dir, graph, models),
+        "pairs": pairs,
+        "cost": part_cost(graph, models),
+    }
+
+
+def write_figures(models: Path, metrics: dict, command: str) -> None:
+    """``models/correspondence.json``, the card's correspondence section and its glance."""
     (models / METRICS_FILE).write_text(json.dumps(metrics, indent=1))
     replace_block(models / "MODEL_CARD.md", BEGIN, END, render(metrics, command))
     update_glance(models)
-    return metrics
 
 
 def set_thresholds(graph: Path, tell_below: float, nested_below: float, uncertain_below: float) -> None:
