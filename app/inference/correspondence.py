@@ -315,7 +315,7 @@ class CorrespondenceModel:
         kept = float(self.regions.vertex_area[cover.region].sum()) / read_area
         if kept < CROWDED_BELOW:
             found.append(
-                f"its places crowd onto a template region of {100 * kept:.0f} % of its own area (a body part's "
+                f"its places crowd onto a template region of {100 * kept:.0f} % of its area as placed (a body part's "
                 f"keep at least {100 * CROWDED_BELOW:.0f} %): not part of a human body, or sent in other units"
             )
         if found:

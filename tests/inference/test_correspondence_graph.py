@@ -12,6 +12,7 @@ from app.geometry.descriptors import cloud_inputs, mesh_inputs
 from app.geometry.laplacian import mesh_operators
 from app.geometry.placing import Part, mesh_part
 from app.geometry.topology import drop_unreferenced
+from app.inference.correspondence import Placement
 from app.inference.models import SpectralModels
 from app.inference.template import PART_NAMES, faces_inside
 from app.samples import PARTS, template_part_mesh
@@ -81,6 +82,21 @@ def test_a_part_of_a_smaller_body_is_placed_where_it_lies(models, monkeypatch):
     as_sent = graph.run(Part.itself(mesh_inputs(0.65 * vertices, faces)))
     assert as_sent.magnification == 1.0
     assert np.mean(np.linalg.norm(as_sent.position - truth, axis=1) < 0.10) < near[1] - 0.2
+
+
+def test_a_part_is_crowded_against_the_area_it_was_read_at(models):
+    """The template's torso placed exactly on itself, each vertex with its own area: its region
+    keeps its area, so it is not crowded as read (× 1); the same places from a part read at × 2
+    (its area, as read, four times the region's) are crowded, as a ball's are."""
+    correspondence = models.correspondence
+    vertices, _, index = _template_part(models, ["torso"])
+    area = models.vertex_area[index]
+    as_read = [
+        Placement(vertices, np.ones(len(index)), index, area, np.zeros(len(index), bool), magnification)
+        for magnification in (1.0, 2.0)
+    ]
+    crowded = [any("crowd" in doubt for doubt in correspondence.doubts(p, correspondence.cover(p))) for p in as_read]
+    assert crowded == [False, True]
 
 
 def test_a_graph_trained_on_other_features_is_refused(monkeypatch):
