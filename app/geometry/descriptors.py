@@ -102,7 +102,7 @@ def _inputs(
     values, basis = eigenpairs(operators, k, None, vectors=True)
     values = np.maximum(values, 0.0)
     bend = np.arcsinh(curvature * CURVATURE_SCALE_M)
-    features = np.column_stack([heat_signature(values, basis), bend, boundary.astype(np.float64)])  # BEND_COLUMN
+    features = np.column_stack([heat_signature(values, basis), bend, boundary.astype(np.float64)])
     return PartInputs(
         features.astype(np.float32),
         operators.mass.diagonal().astype(np.float32),
@@ -120,10 +120,8 @@ def magnified(inputs: PartInputs, scale: float) -> PartInputs:
     :class:`app.inference.correspondence.PlacingGraph`)."""
     values = inputs.eigenvalues.astype(np.float64) / scale**2
     basis = inputs.basis.astype(np.float64) / scale
-    curvature = np.sinh(inputs.features[:, BEND_COLUMN].astype(np.float64)) / CURVATURE_SCALE_M / scale
-    features = np.column_stack(
-        [heat_signature(values, basis), np.arcsinh(curvature * CURVATURE_SCALE_M), inputs.features[:, BOUNDARY_COLUMN]]
-    )
+    bend = np.arcsinh(np.sinh(inputs.features[:, BEND_COLUMN].astype(np.float64)) / scale)  # asinh(H/scale · 5 cm)
+    features = np.column_stack([heat_signature(values, basis), bend, inputs.features[:, BOUNDARY_COLUMN]])
     stencil = GradientStencil(inputs.stencil.neighbours, (inputs.stencil.weights / scale).astype(np.float32))
     return replace(
         inputs,

@@ -200,6 +200,21 @@ MAGNIFICATION_STEPS = (-2, 5)
 LEAVE_MARGIN = 0.02
 
 
+@dataclass(frozen=True)
+class _Read:
+    """The graph's places and confidences of a part's inputs (as read, maybe magnified)."""
+
+    inputs: PartInputs
+    position: np.ndarray
+    confidence: np.ndarray
+
+    @property
+    def mean_confidence(self) -> float:
+        """Area-weighted, as :attr:`Placement.mean_confidence` is."""
+        mass = self.inputs.mass
+        return float(self.confidence @ mass) / float(mass.sum())
+
+
 class PlacingGraph:
     """The ONNX correspondence graph alone: a part's inputs → each vertex's place and confidence,
     read at the magnification that places it surest. What a solver worker runs
@@ -228,22 +243,22 @@ class PlacingGraph:
         (``relaxed``: relaxed toward that part's edge lengths as magnified,
         :mod:`app.inference.relaxation`) handed to the part's vertices."""
         started = time.perf_counter()
-        step, inputs, position, confidence = self._surest(part.inputs)
+        step, read = self._surest(part.inputs)
         graph_ms = (time.perf_counter() - started) * 1e3
+        position = read.position
         if relaxed:
-            position = relaxed_places(position, confidence, inputs.points, part_edges(inputs))
-        return part.expand(Places(position, confidence, graph_ms, MAGNIFICATION_STEP**step))
+            position = relaxed_places(position, read.confidence, read.inputs.points, part_edges(read.inputs))
+        return part.expand(Places(position, read.confidence, graph_ms, MAGNIFICATION_STEP**step))
 
-    def _surest(self, inputs: PartInputs) -> tuple[int, PartInputs, np.ndarray, np.ndarray]:
-        """The step of the magnification the climb settles on (see :data:`MAGNIFICATION_STEP`),
-        the inputs magnified so, and the graph's places and confidences there."""
-        tried: dict[int, tuple[PartInputs, np.ndarray, np.ndarray, float]] = {}
+    def _surest(self, inputs: PartInputs) -> tuple[int, _Read]:
+        """The step of the magnification the climb settles on (see :data:`MAGNIFICATION_STEP`)
+        and the graph's reading of the inputs magnified so."""
+        tried: dict[int, _Read] = {}
 
-        def at(step: int) -> tuple[PartInputs, np.ndarray, np.ndarray, float]:
+        def at(step: int) -> _Read:
             if step not in tried:
                 read = inputs if step == 0 else magnified(inputs, MAGNIFICATION_STEP**step)
-                position, confidence = self._graph(read)
-                tried[step] = (read, position, confidence, float(confidence @ read.mass) / float(read.mass.sum()))
+                tried[step] = _Read(read, *self._graph(read))
             return tried[step]
 
         lowest, highest = MAGNIFICATION_STEPS
@@ -251,12 +266,12 @@ class PlacingGraph:
             step = 0
             while lowest <= step + direction <= highest:
                 margin = LEAVE_MARGIN if step == 0 else 0.0
-                if at(step + direction)[3] <= at(step)[3] + margin:
+                if at(step + direction).mean_confidence <= at(step).mean_confidence + margin:
                     break
                 step += direction
             if step:
-                return (step, *at(step)[:3])
-        return (0, *at(0)[:3])
+                return step, at(step)
+        return 0, at(0)
 
     def _graph(self, inputs: PartInputs) -> tuple[np.ndarray, np.ndarray]:
         position, confidence = self.session.run(None, inputs.feeds())
